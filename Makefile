@@ -1,0 +1,101 @@
+# radpt: finite-element radiosity and Monte Carlo path tracing, compared.
+#
+#   make          build ./radpt
+#   make deps     install the Debian packages radpt needs (only when missing)
+#   make test     build and run every test (Criterion)
+#   make asan     the same tests under AddressSanitizer + UBSan
+#   make demo     render the built-in Cornell box
+#   make bench    throughput benchmarks on the Cornell box
+
+DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
+                libembree-dev libcgal-dev libgmp-dev libmpfr-dev libcriterion-dev \
+                libpng-dev libtinyobjloader-dev gnuplot-nox
+
+CC  ?= gcc
+CXX ?= g++
+BUILD ?= build
+
+GSL_CFLAGS := $(shell pkg-config --cflags gsl 2>/dev/null)
+GSL_LIBS   := $(shell pkg-config --libs gsl 2>/dev/null || echo -lgsl -lgslcblas)
+
+OPT      ?= -O2
+SANITIZE ?=
+CPPFLAGS := -I. $(GSL_CFLAGS) -D_POSIX_C_SOURCE=200809L
+CFLAGS   := -std=c11 $(OPT) -g -Wall -Wextra -Werror -fopenmp -MMD -MP $(SANITIZE)
+# CGAL is heavy to compile: no -g, one or two translation units.
+CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(SANITIZE)
+LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng -ltinyobjloader_double $(GSL_LIBS) \
+            -lgmp -lmpfr -lstdc++ -lm
+LDFLAGS  := -fopenmp $(SANITIZE)
+
+LIB_C   := $(wildcard geometry/*.c solvers/*.c solvers/*/*.c) \
+           $(filter-out bench/main.c, $(wildcard bench/*.c))
+LIB_CXX := $(wildcard geometry/cgal/*.cpp)
+LIB_OBJ := $(LIB_C:%.c=$(BUILD)/%.o) $(LIB_CXX:%.cpp=$(BUILD)/%.o)
+TEST_C  := $(wildcard tests/*.c)
+TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
+
+# Scanned meshes come from CGAL's data set (libcgal-dev), extracted at build
+# time rather than committed.
+CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
+MESHES := scenes/data/bunny00.off
+
+.PHONY: all deps test asan demo bench clean meshes
+all: radpt meshes
+
+radpt: $(BUILD)/radpt
+	cp $< $@
+
+$(BUILD)/radpt: $(BUILD)/bench/main.o $(BUILD)/libradpt.a
+	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+
+$(BUILD)/libradpt.a: $(LIB_OBJ)
+	rm -f $@
+	ar rcs $@ $^
+
+$(BUILD)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CPPFLAGS) $(CFLAGS) -c -o $@ $<
+
+$(BUILD)/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	$(CXX) $(CPPFLAGS) $(CXXFLAGS) -c -o $@ $<
+
+$(BUILD)/tests/run: $(TEST_OBJ) $(BUILD)/libradpt.a
+	$(CC) $(LDFLAGS) -o $@ $^ -lcriterion $(LDLIBS)
+
+$(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"'
+
+meshes: $(MESHES)
+scenes/data/%.off:
+	@mkdir -p scenes/data
+	tar -xzf $(CGAL_DATA) -O data/meshes/$*.off > $@.tmp && mv $@.tmp $@
+
+# Criterion runs each test in its own process; two workers for two cores.
+test: $(BUILD)/tests/run $(BUILD)/radpt meshes
+	$(BUILD)/tests/run --jobs 2
+
+asan:
+	$(MAKE) BUILD=build-asan OPT=-O1 \
+	    SANITIZE="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined" test
+
+deps:
+	@missing=""; for p in $(DEB_PACKAGES); do \
+	    dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	    echo "installing:$$missing"; \
+	    SUDO=; [ "$$(id -u)" -eq 0 ] || SUDO=sudo; \
+	    $$SUDO apt-get update -qq && \
+	    DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $$missing; \
+	else echo "all Debian packages present"; fi
+
+demo: radpt meshes
+	./radpt info scenes/cornell.scene
+
+bench: radpt meshes
+	./radpt info scenes/cornell.scene
+
+clean:
+	rm -rf build build-asan radpt scenes/data
+
+-include $(LIB_OBJ:.o=.d) $(TEST_OBJ:.o=.d) $(BUILD)/bench/main.d

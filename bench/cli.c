@@ -1,0 +1,232 @@
+#include "cli.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+double rp_clock(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int usage(const rp_cli *cli, const char *fmt, const char *a)
+{
+    fprintf(stderr, "radpt %s: ", cli->command);
+    fprintf(stderr, fmt, a);
+    fprintf(stderr, " (see radpt help)\n");
+    return 2;
+}
+
+static int parse_u64(const char *s, uint64_t *out)
+{
+    char *end;
+    errno = 0;
+    if (*s == '-')
+        return -1;
+    unsigned long long v = strtoull(s, &end, 0);
+    if (end == s || *end || errno)
+        return -1;
+    *out = v;
+    return 0;
+}
+
+static const rp_option_spec *method_option(const rp_solver_type *t, const char *name)
+{
+    for (const rp_option_spec *o = t ? t->options : NULL; o && o->name; o++)
+        if (strcmp(o->name, name) == 0)
+            return o;
+    return NULL;
+}
+
+int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_extra,
+                 int wants_method)
+{
+    const char *command = cli->command;
+    memset(cli, 0, sizeof *cli);
+    cli->command = command;
+    cli->seed = 1;
+
+    /* The method decides which options are flags: find it first. */
+    const rp_solver_type *type = NULL;
+    for (int i = 2; i < argc; i++) {
+        if (strcmp(argv[i], "--method") == 0 && i + 1 < argc)
+            cli->method = argv[i + 1];
+        else if (strncmp(argv[i], "--method=", 9) == 0)
+            cli->method = argv[i] + 9;
+    }
+    if (cli->method) {
+        if (!wants_method)
+            return usage(cli, "takes no --method%s", "");
+        type = rp_solver_lookup(cli->method);
+        if (!type) {
+            fprintf(stderr, "radpt %s: unknown method '%s'; known methods:", command, cli->method);
+            for (const rp_solver_type *const *t = rp_solver_types(); *t; t++)
+                fprintf(stderr, " %s", (*t)->name);
+            fprintf(stderr, "\n");
+            return 2;
+        }
+    }
+
+    for (int i = 2; i < argc; i++) {
+        char *a = argv[i];
+        if (a[0] != '-' || a[1] == '\0') {
+            if (cli->scene)
+                return usage(cli, "unexpected argument '%s'", a);
+            cli->scene = a;
+            continue;
+        }
+        if (strcmp(a, "-o") == 0) {
+            if (i + 1 >= argc)
+                return usage(cli, "-o needs a file name%s", "");
+            cli->out = argv[++i];
+            continue;
+        }
+        if (strncmp(a, "--", 2) != 0)
+            return usage(cli, "unknown option '%s'", a);
+        /* --name value or --name=value */
+        char name[64];
+        const char *value = NULL;
+        const char *eq = strchr(a + 2, '=');
+        size_t len = eq ? (size_t)(eq - (a + 2)) : strlen(a + 2);
+        if (len == 0 || len >= sizeof name)
+            return usage(cli, "bad option '%s'", a);
+        memcpy(name, a + 2, len);
+        name[len] = '\0';
+
+        int is_flag = strcmp(name, "json") == 0 || strcmp(name, "surface-averages") == 0;
+        const rp_option_spec *spec = method_option(type, name);
+        if (spec && !spec->arg)
+            is_flag = 1;
+        if (is_flag) {
+            if (eq)
+                return usage(cli, "option '--%s' takes no value", name);
+            value = "1";
+        } else if (eq) {
+            value = eq + 1;
+        } else {
+            if (i + 1 >= argc)
+                return usage(cli, "option '--%s' needs a value", name);
+            value = argv[++i];
+        }
+
+        if (strcmp(name, "method") == 0) {
+            /* found in the first pass */
+        } else if (strcmp(name, "json") == 0) {
+            cli->json = 1;
+        } else if (strcmp(name, "surface-averages") == 0) {
+            cli->surface_averages = 1;
+        } else if (strcmp(name, "png") == 0) {
+            cli->png = value;
+        } else if (strcmp(name, "seed") == 0) {
+            if (parse_u64(value, &cli->seed))
+                return usage(cli, "--seed: '%s' is not a non-negative integer", value);
+        } else if (strcmp(name, "threads") == 0) {
+            uint64_t t;
+            if (parse_u64(value, &t) || t < 1 || t > 1024)
+                return usage(cli, "--threads: '%s' is not a thread count in [1, 1024]", value);
+            cli->threads = (int)t;
+        } else if (strcmp(name, "time") == 0) {
+            char *end;
+            double t = strtod(value, &end);
+            if (end == value || *end || !isfinite(t) || t <= 0)
+                return usage(cli, "--time: '%s' is not a positive number of seconds", value);
+            cli->time_budget = t;
+        } else if (spec) {
+            if (cli->noptions == RP_CLI_MAX_OPTIONS)
+                return usage(cli, "too many options%s", "");
+            cli->keys[cli->noptions] = spec->name;
+            cli->values[cli->noptions++] = value;
+        } else {
+            int ok = 0;
+            for (const char *const *e = allowed_extra; e && *e; e++)
+                ok |= strcmp(*e, name) == 0;
+            if (!ok) {
+                if (type)
+                    fprintf(stderr, "radpt %s: method %s has no option '--%s' (see radpt help %s)\n",
+                            command, type->name, name, type->name);
+                else
+                    fprintf(stderr, "radpt %s: unknown option '--%s' (see radpt help)\n", command, name);
+                return 2;
+            }
+            if (cli->nextra == RP_CLI_MAX_OPTIONS)
+                return usage(cli, "too many options%s", "");
+            /* keep the static name from allowed_extra, not the stack copy */
+            for (const char *const *e = allowed_extra; *e; e++)
+                if (strcmp(*e, name) == 0)
+                    cli->extra_keys[cli->nextra] = *e;
+            cli->extra_values[cli->nextra++] = value;
+        }
+    }
+    if (!cli->scene)
+        return usage(cli, "needs a scene file%s", "");
+    if (wants_method && !cli->method)
+        return usage(cli, "needs --method M%s", "");
+    return 0;
+}
+
+const char *rp_cli_extra(const rp_cli *cli, const char *name)
+{
+    const char *v = NULL;
+    for (size_t i = 0; i < cli->nextra; i++)
+        if (strcmp(cli->extra_keys[i], name) == 0)
+            v = cli->extra_values[i];
+    return v;
+}
+
+int rp_cli_fail(rp_status st, const rp_error *err)
+{
+    fprintf(stderr, "radpt: %s\n", err && err->message[0] ? err->message : rp_status_string(st));
+    return rp_status_exit_code(st);
+}
+
+void rp_progress_begin(rp_progress *p, const char *label)
+{
+    p->tty = isatty(STDERR_FILENO);
+    p->last = -1;
+    p->label = label;
+}
+
+void rp_progress_update(rp_progress *p, double fraction, const char *detail)
+{
+    if (!p->tty)
+        return;
+    double now = rp_clock();
+    if (now - p->last < 0.1 && fraction < 1)
+        return;
+    p->last = now;
+    if (fraction < 0)
+        fraction = 0;
+    if (fraction > 1)
+        fraction = 1;
+    int width = 30, filled = (int)(fraction * width + 0.5);
+    fprintf(stderr, "\r%s [", p->label);
+    for (int i = 0; i < width; i++)
+        fputc(i < filled ? '#' : '.', stderr);
+    fprintf(stderr, "] %3.0f%% %s\033[K", 100 * fraction, detail ? detail : "");
+    fflush(stderr);
+}
+
+void rp_progress_end(rp_progress *p)
+{
+    if (p->tty && p->last >= 0)
+        fputc('\n', stderr);
+}
+
+void rp_json_string(FILE *f, const char *s)
+{
+    fputc('"', f);
+    for (const unsigned char *c = (const unsigned char *)s; *c; c++) {
+        if (*c == '"' || *c == '\\')
+            fprintf(f, "\\%c", *c);
+        else if (*c < 0x20)
+            fprintf(f, "\\u%04x", *c);
+        else
+            fputc(*c, f);
+    }
+    fputc('"', f);
+}

@@ -1,0 +1,63 @@
+/* Command-line plumbing shared by the radpt subcommands: argument parsing,
+ * usage errors, progress on stderr, JSON string output. */
+#ifndef RP_CLI_H
+#define RP_CLI_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+#include "../geometry/status.h"
+#include "../solvers/solver.h"
+
+#define RP_CLI_MAX_OPTIONS 64
+
+typedef struct rp_cli {
+    const char *command;
+    const char *scene;         /* the positional argument */
+    const char *method;
+    const char *out;           /* -o */
+    const char *png;           /* --png */
+    uint64_t seed;
+    int threads;
+    double time_budget;        /* --time, seconds; 0 = none */
+    int json;
+    int surface_averages;
+    /* method options, passed through to the solver */
+    const char *keys[RP_CLI_MAX_OPTIONS];
+    const char *values[RP_CLI_MAX_OPTIONS];
+    size_t noptions;
+    /* generic options a command accepts besides the method's, e.g. "from" */
+    const char *extra_keys[RP_CLI_MAX_OPTIONS];
+    const char *extra_values[RP_CLI_MAX_OPTIONS];
+    size_t nextra;
+} rp_cli;
+
+/* Parses argv[2..] for a command.  allowed_extra lists extra "--name"
+ * options (each taking a value) the command accepts, NULL-terminated.
+ * On a usage error prints "radpt COMMAND: ..." and returns 2. */
+int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_extra,
+                 int wants_method);
+
+/* An extra option's value or NULL. */
+const char *rp_cli_extra(const rp_cli *cli, const char *name);
+
+/* Prints "radpt: message" for an error and returns its exit code. */
+int rp_cli_fail(rp_status st, const rp_error *err);
+
+/* Progress on stderr, a bar only when stderr is a terminal. */
+typedef struct rp_progress {
+    int tty;
+    double last;
+    const char *label;
+} rp_progress;
+void rp_progress_begin(rp_progress *p, const char *label);
+void rp_progress_update(rp_progress *p, double fraction, const char *detail);
+void rp_progress_end(rp_progress *p);
+
+/* Monotonic wall clock, seconds. */
+double rp_clock(void);
+
+/* Writes s as a JSON string literal (with quotes). */
+void rp_json_string(FILE *f, const char *s);
+
+#endif

@@ -1,0 +1,322 @@
+/* radpt render and radpt probe: the harness loop around one solver.
+ *
+ * The harness owns the clock: it calls step until the method's own rule is
+ * met or the --time budget runs out, then estimate once; the cost of the
+ * estimate is not solver time. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../geometry/scene.h"
+#include "../solvers/solver.h"
+#include "cli.h"
+#include "commands.h"
+#include "image.h"
+#include "spectrum.h"
+
+typedef struct run_totals {
+    rp_step_info sum;   /* rays, paths, form factors, iterations added up */
+    rp_step_info last;  /* the last step's residual, unshot, progress */
+    double seconds;
+    size_t steps;
+} run_totals;
+
+static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *label,
+                            run_totals *tot, rp_error *err)
+{
+    rp_progress bar;
+    rp_progress_begin(&bar, label);
+    memset(tot, 0, sizeof *tot);
+    double t0 = rp_clock();
+    for (;;) {
+        rp_step_info info;
+        rp_status st = rp_solver_step(solver, &info, err);
+        if (st != RP_OK) {
+            rp_progress_end(&bar);
+            return st;
+        }
+        tot->steps++;
+        tot->sum.rays += info.rays;
+        tot->sum.paths += info.paths;
+        tot->sum.form_factors += info.form_factors;
+        tot->sum.iterations += info.iterations;
+        tot->last = info;
+        tot->seconds = rp_clock() - t0;
+        double frac = info.progress;
+        if (cli->time_budget > 0 && tot->seconds / cli->time_budget > frac)
+            frac = tot->seconds / cli->time_budget;
+        char detail[96];
+        snprintf(detail, sizeof detail, "%.0f iterations, %.1f s", tot->sum.iterations, tot->seconds);
+        rp_progress_update(&bar, frac, detail);
+        if (info.converged || (cli->time_budget > 0 && tot->seconds >= cli->time_budget))
+            break;
+    }
+    rp_progress_end(&bar);
+    return RP_OK;
+}
+
+static void fill_options(rp_options *o, const rp_cli *cli, unsigned want)
+{
+    memset(o, 0, sizeof *o);
+    o->size = sizeof *o;
+    o->want = want;
+    o->seed = cli->seed;
+    o->threads = cli->threads;
+    o->keys = cli->keys;
+    o->values = cli->values;
+    o->count = cli->noptions;
+    o->open_ended = cli->time_budget > 0;
+}
+
+static void options_text(const rp_cli *cli, char *buf, size_t n)
+{
+    buf[0] = '\0';
+    size_t used = 0;
+    for (size_t i = 0; i < cli->noptions && used < n; i++)
+        used += (size_t)snprintf(buf + used, n - used, "%s--%s %s", i ? " " : "", cli->keys[i],
+                                 cli->values[i]);
+}
+
+/* Channel names and planes for a scene's bands (DESIGN.md, "Images"). */
+typedef struct image_planes {
+    size_t nchannels;
+    char **names;
+    float **planes;
+} image_planes;
+
+static void planes_free(image_planes *p)
+{
+    for (size_t c = 0; c < p->nchannels; c++) {
+        free(p->names ? p->names[c] : NULL);
+        free(p->planes ? p->planes[c] : NULL);
+    }
+    free(p->names);
+    free(p->planes);
+}
+
+static rp_status planes_make(const rp_scene *scene, const float *radiance, size_t npix,
+                             image_planes *p, rp_error *err)
+{
+    size_t nb = rp_scene_nbands(scene);
+    rp_band_kind kind = rp_scene_band_kind(scene);
+    p->nchannels = kind == RP_BANDS_SPECTRAL ? nb + 3 : nb;
+    p->names = calloc(p->nchannels, sizeof *p->names);
+    p->planes = calloc(p->nchannels, sizeof *p->planes);
+    if (!p->names || !p->planes)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory for the image");
+    for (size_t c = 0; c < p->nchannels; c++) {
+        p->names[c] = malloc(32);
+        p->planes[c] = calloc(npix, sizeof(float));
+        if (!p->names[c] || !p->planes[c])
+            return rp_error_set(err, RP_ERR_NOMEM, "out of memory for the image");
+    }
+    static const char *rgb[3] = {"R", "G", "B"};
+    if (kind == RP_BANDS_GREY)
+        strcpy(p->names[0], "Y");
+    else if (kind == RP_BANDS_RGB)
+        for (int c = 0; c < 3; c++)
+            strcpy(p->names[c], rgb[c]);
+    else {
+        const double *nm = rp_scene_wavelengths(scene);
+        for (size_t b = 0; b < nb; b++)
+            snprintf(p->names[b], 32, "L%g", nm[b]);
+        for (int c = 0; c < 3; c++)
+            strcpy(p->names[nb + (size_t)c], rgb[c]);
+    }
+    for (size_t b = 0; b < nb; b++)
+        for (size_t i = 0; i < npix; i++)
+            p->planes[b][i] = radiance[i * nb + b];
+    if (kind == RP_BANDS_SPECTRAL) {
+        double *m = malloc(3 * nb * sizeof *m);
+        if (!m)
+            return rp_error_set(err, RP_ERR_NOMEM, "out of memory for the image");
+        rp_spectrum_rgb_weights(rp_scene_wavelengths(scene), nb, m);
+        for (size_t i = 0; i < npix; i++)
+            for (size_t c = 0; c < 3; c++) {
+                double v = 0;
+                for (size_t b = 0; b < nb; b++)
+                    v += m[c * nb + b] * radiance[i * nb + b];
+                p->planes[nb + c][i] = (float)v;
+            }
+        free(m);
+    }
+    return RP_OK;
+}
+
+int rp_cmd_render(int argc, char **argv)
+{
+    rp_cli cli = {.command = "render"};
+    int rc = rp_cli_parse(&cli, argc, argv, NULL, 1);
+    if (rc)
+        return rc;
+    if (!cli.out) {
+        fprintf(stderr, "radpt render: needs -o OUT.exr (see radpt help)\n");
+        return 2;
+    }
+    rp_error err;
+    rp_scene *scene = NULL;
+    rp_solver *solver = NULL;
+    image_planes planes = {0};
+    float *radiance = NULL;
+    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    if (st != RP_OK)
+        goto done;
+    const rp_camera *cam = rp_scene_camera(scene);
+    if (!cam) {
+        st = rp_error_set(&err, RP_ERR_INPUT, "%s: the scene has no camera to render from", cli.scene);
+        goto done;
+    }
+    rp_options opts;
+    fill_options(&opts, &cli, RP_WANT_IMAGE);
+    st = rp_solver_create(rp_solver_lookup(cli.method), scene, &opts, &solver, &err);
+    if (st != RP_OK)
+        goto done;
+    run_totals tot;
+    st = run_solver(solver, &cli, "render", &tot, &err);
+    if (st != RP_OK)
+        goto done;
+
+    size_t nb = rp_scene_nbands(scene), npix = (size_t)cam->width * cam->height;
+    radiance = malloc(npix * nb * sizeof *radiance);
+    if (!radiance) {
+        st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory for the image");
+        goto done;
+    }
+    rp_estimate est = {.radiance = radiance};
+    st = rp_solver_estimate(solver, &est, &err);
+    if (st != RP_OK)
+        goto done;
+    st = planes_make(scene, radiance, npix, &planes, &err);
+    if (st != RP_OK)
+        goto done;
+
+    char hash[17], seed[32], samples[32], seconds[32], threads[16], rays[32], optstr[1024];
+    rp_scene_hash(scene, hash);
+    snprintf(seed, sizeof seed, "%llu", (unsigned long long)cli.seed);
+    snprintf(samples, sizeof samples, "%.17g", est.samples);
+    snprintf(seconds, sizeof seconds, "%.6f", tot.seconds);
+    snprintf(threads, sizeof threads, "%d", cli.threads);
+    snprintf(rays, sizeof rays, "%.17g", tot.sum.rays);
+    options_text(&cli, optstr, sizeof optstr);
+    rp_image_attr attrs[] = {
+        {"radpt:scene", cli.scene}, {"radpt:scene_hash", hash}, {"radpt:method", cli.method},
+        {"radpt:options", optstr},  {"radpt:seed", seed},       {"radpt:samples", samples},
+        {"radpt:seconds", seconds}, {"radpt:threads", threads}, {"radpt:rays", rays},
+    };
+    rp_image img = {
+        .width = cam->width, .height = cam->height, .nchannels = planes.nchannels,
+        .channel_names = (const char *const *)planes.names,
+        .planes = (const float *const *)planes.planes,
+        .attrs = attrs, .nattrs = sizeof attrs / sizeof attrs[0],
+    };
+    st = rp_image_write_exr(cli.out, &img, &err);
+    if (st != RP_OK)
+        goto done;
+    if (cli.png) {
+        size_t r = planes.nchannels >= 3 ? planes.nchannels - 3 : 0;
+        st = rp_image_write_png(cli.png, cam->width, cam->height, planes.planes[r],
+                                planes.planes[planes.nchannels >= 3 ? r + 1 : 0],
+                                planes.planes[planes.nchannels >= 3 ? r + 2 : 0], 1.0, &err);
+        if (st != RP_OK)
+            goto done;
+    }
+    printf("wrote %s: %u x %u, %s, %.17g samples, %.3f s", cli.out, cam->width, cam->height,
+           cli.method, est.samples, tot.seconds);
+    if (tot.sum.rays > 0 && tot.seconds > 0)
+        printf(", %.3g rays/s", tot.sum.rays / tot.seconds);
+    if (tot.sum.paths > 0 && tot.seconds > 0)
+        printf(", %.3g paths/s", tot.sum.paths / tot.seconds);
+    printf("\n");
+    if (cli.png)
+        printf("wrote %s\n", cli.png);
+done:
+    planes_free(&planes);
+    free(radiance);
+    rp_solver_destroy(solver);
+    rp_scene_destroy(scene);
+    return st == RP_OK ? 0 : rp_cli_fail(st, &err);
+}
+
+int rp_cmd_probe(int argc, char **argv)
+{
+    rp_cli cli = {.command = "probe"};
+    int rc = rp_cli_parse(&cli, argc, argv, NULL, 1);
+    if (rc)
+        return rc;
+    if (!cli.surface_averages) {
+        fprintf(stderr, "radpt probe: say what to probe: --surface-averages (see radpt help)\n");
+        return 2;
+    }
+    rp_error err;
+    rp_scene *scene = NULL;
+    rp_solver *solver = NULL;
+    double *mean = NULL, *se = NULL;
+    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    if (st != RP_OK)
+        goto done;
+    rp_options opts;
+    fill_options(&opts, &cli, RP_WANT_SURFACES);
+    st = rp_solver_create(rp_solver_lookup(cli.method), scene, &opts, &solver, &err);
+    if (st != RP_OK)
+        goto done;
+    run_totals tot;
+    st = run_solver(solver, &cli, "probe", &tot, &err);
+    if (st != RP_OK)
+        goto done;
+    size_t nb = rp_scene_nbands(scene), ns = rp_scene_nsurfaces(scene);
+    mean = calloc(ns * nb, sizeof *mean);
+    se = calloc(ns * nb, sizeof *se);
+    if (!mean || !se) {
+        st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory");
+        goto done;
+    }
+    rp_estimate est = {.surface_radiance = mean, .surface_stderr = se};
+    st = rp_solver_estimate(solver, &est, &err);
+    if (st != RP_OK)
+        goto done;
+    for (size_t i = 0; i < ns * nb; i++)
+        if (!isfinite(mean[i]) || !isfinite(se[i])) {
+            st = rp_error_set(&err, RP_ERR_RUNTIME, "method %s produced a non-finite value", cli.method);
+            goto done;
+        }
+    const rp_surface *surf = rp_scene_surfaces(scene);
+    if (cli.json) {
+        char hash[17];
+        rp_scene_hash(scene, hash);
+        printf("{\"scene\": ");
+        rp_json_string(stdout, cli.scene);
+        printf(", \"hash\": \"%s\", \"method\": ", hash);
+        rp_json_string(stdout, cli.method);
+        printf(", \"seed\": %llu, \"samples\": %.17g, \"seconds\": %.6f, \"rays\": %.17g, \"surfaces\": [",
+               (unsigned long long)cli.seed, est.samples, tot.seconds, tot.sum.rays);
+        for (size_t s = 0; s < ns; s++) {
+            printf("%s{\"name\": ", s ? ", " : "");
+            rp_json_string(stdout, surf[s].name);
+            printf(", \"area\": %.12g, \"radiance\": [", surf[s].area);
+            for (size_t b = 0; b < nb; b++)
+                printf("%s%.10g", b ? ", " : "", mean[s * nb + b]);
+            printf("], \"stderr\": [");
+            for (size_t b = 0; b < nb; b++)
+                printf("%s%.6g", b ? ", " : "", se[s * nb + b]);
+            printf("]}");
+        }
+        printf("]}\n");
+    } else {
+        printf("# %s, method %s, %.17g samples, %.3f s; radiance W sr^-1 m^-2 per band +- standard error\n",
+               cli.scene, cli.method, est.samples, tot.seconds);
+        printf("%-20s %14s  radiance\n", "surface", "area");
+        for (size_t s = 0; s < ns; s++) {
+            printf("%-20s %14.6f ", surf[s].name, surf[s].area);
+            for (size_t b = 0; b < nb; b++)
+                printf(" %.6g +- %.2g", mean[s * nb + b], se[s * nb + b]);
+            printf("\n");
+        }
+    }
+done:
+    free(mean);
+    free(se);
+    rp_solver_destroy(solver);
+    rp_scene_destroy(scene);
+    return st == RP_OK ? 0 : rp_cli_fail(st, &err);
+}

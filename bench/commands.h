@@ -1,0 +1,9 @@
+/* The radpt subcommands; each returns the process exit status. */
+#ifndef RP_COMMANDS_H
+#define RP_COMMANDS_H
+
+int rp_cmd_info(int argc, char **argv);
+int rp_cmd_render(int argc, char **argv);
+int rp_cmd_probe(int argc, char **argv);
+
+#endif

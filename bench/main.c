@@ -1,0 +1,83 @@
+/* radpt: the command-line front (DESIGN.md, "Command line"). */
+#include <gsl/gsl_errno.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../solvers/solver.h"
+#include "commands.h"
+
+static void print_usage(FILE *f)
+{
+    fputs("usage:\n"
+          "  radpt info SCENE [--json]\n"
+          "      bands, camera, surfaces (material, faces, area, emitted power), whether the\n"
+          "      scene is closed, and the default radiosity subdivision with its quality\n"
+          "  radpt render SCENE --method M [method options] [--seed S] [--threads T]\n"
+          "               [--time SECONDS] -o OUT.exr [--png OUT.png]\n"
+          "      render the scene's camera view; EXR of linear radiance, PNG preview\n"
+          "  radpt probe SCENE --method M [method options] --surface-averages [--json]\n"
+          "               [--seed S] [--threads T] [--time SECONDS]\n"
+          "      area-averaged outgoing radiance of every surface, with standard errors\n"
+          "  radpt help [METHOD]\n"
+          "      this text, or a method's options\n"
+          "\n"
+          "SCENE is a scene file (format 1, see README.md) or a Wavefront .obj with its .mtl.\n"
+          "--time stops a run after SECONDS; without it a method stops by its own rule\n"
+          "(e.g. --spp for pathtrace). --seed defaults to 1, --threads to all cores.\n"
+          "Exit status: 0 success, 1 runtime failure, 2 bad input or usage.\n\nmethods:\n",
+          f);
+    for (const rp_solver_type *const *t = rp_solver_types(); *t; t++)
+        fprintf(f, "  %-18s %s\n", (*t)->name, (*t)->summary);
+}
+
+static int print_method(const char *name)
+{
+    const rp_solver_type *t = rp_solver_lookup(name);
+    if (!t) {
+        fprintf(stderr, "radpt help: unknown method '%s'; known methods:", name);
+        for (const rp_solver_type *const *k = rp_solver_types(); *k; k++)
+            fprintf(stderr, " %s", (*k)->name);
+        fprintf(stderr, "\n");
+        return 2;
+    }
+    printf("method %s: %s\n\noptions:\n", t->name, t->summary);
+    for (const rp_option_spec *o = t->options; o && o->name; o++) {
+        char head[64];
+        snprintf(head, sizeof head, "--%s%s%s", o->name, o->arg ? " " : "", o->arg ? o->arg : "");
+        printf("  %-28s %s", head, o->help);
+        if (o->fallback)
+            printf(" (default %s)", o->fallback);
+        printf("\n");
+    }
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    gsl_set_error_handler_off();
+    if (argc < 2) {
+        print_usage(stderr);
+        return 2;
+    }
+    const char *cmd = argv[1];
+    if (!strcmp(cmd, "help") || !strcmp(cmd, "--help") || !strcmp(cmd, "-h")) {
+        if (argc > 2)
+            return print_method(argv[2]);
+        print_usage(stdout);
+        return 0;
+    }
+    for (int i = 2; i < argc; i++)
+        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
+            print_usage(stdout);
+            return 0;
+        }
+    if (!strcmp(cmd, "info"))
+        return rp_cmd_info(argc, argv);
+    if (!strcmp(cmd, "render"))
+        return rp_cmd_render(argc, argv);
+    if (!strcmp(cmd, "probe"))
+        return rp_cmd_probe(argc, argv);
+    fprintf(stderr, "radpt: unknown command '%s'\n", cmd);
+    print_usage(stderr);
+    return 2;
+}

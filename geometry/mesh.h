@@ -1,0 +1,78 @@
+/* Elements for finite-element radiosity: every face of every surface is
+ * subdivided into a regular grid of elements (quads into n x m quads,
+ * triangles into k^2 triangles).  Edge subdivision counts are chosen per
+ * class of edges that must agree (opposite sides of a quad, all sides of a
+ * triangle, edges shared by two faces of one surface), so the mesh is
+ * conforming inside each surface: no T-vertices.  Vertices are shared
+ * between the elements of a surface and adjacency is recorded, so a solver
+ * can average element values to vertices and interpolate (Gouraud). */
+#ifndef RP_MESH_H
+#define RP_MESH_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "scene.h"
+
+typedef struct rp_mesh rp_mesh;
+
+typedef struct rp_mesh_params {
+    size_t size;          /* sizeof(rp_mesh_params), so the struct can grow */
+    double max_edge;      /* target longest element edge, scene units; 0: unused */
+    size_t target_count;  /* target total element count; 0: unused */
+} rp_mesh_params;
+
+/* Default: about 1,000 elements for the whole scene. */
+#define RP_MESH_DEFAULT_COUNT 1000
+
+typedef struct rp_element {
+    uint32_t v[4];     /* mesh vertex indices, counter-clockwise from the front;
+                          v[3] == RP_NONE for triangles */
+    uint32_t nverts;   /* 3 or 4 */
+    uint32_t face;     /* scene face it subdivides */
+    uint32_t surface;
+    rp_vec3 centroid;
+    rp_vec3 normal;    /* the face's unit front normal */
+    double area;
+} rp_element;
+
+typedef struct rp_mesh_quality {
+    double min_aspect, mean_aspect, max_aspect; /* longest edge / shortest altitude-like
+                                                   measure; 1 is best (see mesh.c) */
+    double min_area, max_area;
+} rp_mesh_quality;
+
+/* Subdivides every face of the scene.  With both max_edge and target_count
+ * zero, uses RP_MESH_DEFAULT_COUNT.  Exactly one of them may be set. */
+rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params,
+                         rp_mesh **out, rp_error *err);
+void rp_mesh_destroy(rp_mesh *mesh);
+
+size_t rp_mesh_nelements(const rp_mesh *mesh);
+const rp_element *rp_mesh_elements(const rp_mesh *mesh);
+size_t rp_mesh_nvertices(const rp_mesh *mesh);
+const rp_vec3 *rp_mesh_vertices(const rp_mesh *mesh);
+
+/* Elements of one face are contiguous: [first, first + count). */
+void rp_mesh_face_elements(const rp_mesh *mesh, uint32_t face, uint32_t *first, uint32_t *count);
+/* Elements of one surface are contiguous too. */
+void rp_mesh_surface_elements(const rp_mesh *mesh, uint32_t surface, uint32_t *first, uint32_t *count);
+
+/* Neighbour across each edge of element e (edge i runs v[i] -> v[i+1]),
+ * RP_NONE on a surface boundary.  out has room for 4. */
+void rp_mesh_neighbors(const rp_mesh *mesh, uint32_t e, uint32_t out[4]);
+
+/* Elements incident to vertex v: *count entries from the returned array. */
+const uint32_t *rp_mesh_vertex_elements(const rp_mesh *mesh, uint32_t v, size_t *count);
+
+/* The element of a face that contains point p (a point on the face,
+ * e.g. a ray hit).  Constant time: inverts the face's grid. */
+uint32_t rp_mesh_locate(const rp_mesh *mesh, uint32_t face, rp_vec3 p);
+
+/* Barycentric weights of p among the element's vertices (3 or 4 weights,
+ * bilinear for quads), for interpolating vertex values.  w has room for 4. */
+void rp_mesh_element_weights(const rp_mesh *mesh, uint32_t e, rp_vec3 p, double w[4]);
+
+void rp_mesh_quality_get(const rp_mesh *mesh, rp_mesh_quality *q);
+
+#endif

@@ -1,0 +1,58 @@
+/* Ray casting through Embree 3: the only module that calls rtc*.
+ *
+ * Built once over every face of a scene (triangles and quads), then shared
+ * read-only by all threads.  Rays start offset from surfaces by an epsilon
+ * scaled to the scene's size, so a ray leaving a surface does not hit it
+ * again (self-intersection). */
+#ifndef RP_RAYCAST_H
+#define RP_RAYCAST_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "mesh.h"
+#include "scene.h"
+
+typedef struct rp_raycast rp_raycast;
+
+typedef struct rp_hit {
+    double t;          /* distance along the (unit) direction */
+    rp_vec3 p;         /* hit point */
+    rp_vec3 n;         /* the face's unit front normal */
+    uint32_t face;
+    uint32_t surface;
+    uint32_t element;  /* RP_NONE unless the raycaster was given a mesh */
+    double u, v;       /* Embree's barycentrics on the face */
+    int front;         /* 1 if the ray arrived on the front (dot(d, n) < 0) */
+} rp_hit;
+
+/* mesh may be NULL; with one, hits also name the element. */
+rp_status rp_raycast_create(const rp_scene *scene, const rp_mesh *mesh,
+                            rp_raycast **out, rp_error *err);
+void rp_raycast_destroy(rp_raycast *rc);
+
+/* The self-intersection epsilon, scaled to the scene. */
+double rp_raycast_epsilon(const rp_raycast *rc);
+
+/* Closest hit along o + t d, t in (0, tmax]; d need not be unit.
+ * Returns 1 and fills hit on a hit, 0 on a miss. */
+int rp_ray_closest(const rp_raycast *rc, rp_vec3 o, rp_vec3 d, double tmax, rp_hit *hit);
+
+/* Closest hit of a ray leaving surface point p with normal n (the face's
+ * front normal) in direction d: the origin is offset along +-n to the side
+ * d points to. */
+int rp_ray_closest_from(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, rp_hit *hit);
+
+/* 1 if the segment between surface points a (normal na) and b (normal nb)
+ * is blocked by any face; both ends are offset off their surfaces. */
+int rp_ray_occluded(const rp_raycast *rc, rp_vec3 a, rp_vec3 na, rp_vec3 b, rp_vec3 nb);
+
+/* Packets of independent rays (rtcIntersect1M / rtcOccluded1M) for
+ * throughput.  hit_mask[i] is 1 on a hit. */
+void rp_ray_closest_n(const rp_raycast *rc, size_t n, const rp_vec3 *o, const rp_vec3 *d,
+                      double tmax, rp_hit *hits, unsigned char *hit_mask);
+
+/* Counts of rays cast so far are the caller's business (rays are cheap to
+ * count where they are cast). */
+
+#endif

@@ -1,0 +1,113 @@
+/* The solver interface (DESIGN.md, "The solver interface").
+ *
+ * A GSL-style type table: each method is one file exporting one const
+ * rp_solver_type, and solvers/registry.c maps names to tables.  The harness
+ * (bench/) owns clocks, files and references: it calls init, then step until
+ * its budget runs out, and estimate at checkpoints.  Nothing here prints;
+ * messages go through the optional log callback. */
+#ifndef RP_SOLVER_H
+#define RP_SOLVER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../geometry/scene.h"
+#include "../geometry/status.h"
+
+/* What the harness wants answered. */
+enum {
+    RP_WANT_IMAGE = 1u << 0,    /* radiance per pixel through the camera */
+    RP_WANT_SURFACES = 1u << 1  /* area-averaged radiance per surface */
+};
+
+/* A method option: the command line's "--name value" (flags: value "1"). */
+typedef struct rp_option_spec {
+    const char *name;     /* without dashes: "spp", "sampler", "max-depth" */
+    const char *arg;      /* "N", "random|stratified|sobol", NULL for a flag */
+    const char *help;     /* one line, shown by --help */
+    const char *fallback; /* default value as text, NULL if none */
+} rp_option_spec;
+
+typedef void (*rp_log_fn)(void *ctx, const char *message);
+
+typedef struct rp_options {
+    size_t size;          /* sizeof(rp_options), so the struct can grow */
+    unsigned want;        /* RP_WANT_* bits */
+    uint64_t seed;
+    int threads;          /* 0: OpenMP's default */
+    /* Method options by name, as given (validated by the method's init). */
+    const char *const *keys;
+    const char *const *values;
+    size_t count;
+    /* Set when the harness stops the run by its own budget (--time): the
+     * method then stops by its own rule only when that rule's option was
+     * given explicitly, not by its default. */
+    int open_ended;
+    rp_log_fn log;        /* may be NULL */
+    void *log_ctx;
+} rp_options;
+
+/* Work done by one step (added up by the harness). */
+typedef struct rp_step_info {
+    double rays;          /* rays cast */
+    double paths;         /* camera or probe paths traced */
+    double form_factors;  /* form factors computed */
+    double iterations;    /* sweeps, shots or sample passes completed */
+    double residual;      /* relative residual after the step, or -1 */
+    double unshot;        /* unshot power fraction, or -1 */
+    int converged;        /* the method's own stopping rule is met */
+    double progress;      /* fraction of the way to that rule, in [0, 1] */
+} rp_step_info;
+
+/* Answers in the common space: radiance, W sr^-1 m^-2, per band.  The
+ * harness allocates; the solver fills what is non-NULL. */
+typedef struct rp_estimate {
+    /* Camera image, width * height * nbands, row-major from the top-left,
+     * band fastest. */
+    float *radiance;
+    float *variance;         /* variance of the pixel mean, NULL if not wanted */
+    /* Per surface, nsurfaces * nbands: area-averaged outgoing radiance and
+     * (Monte Carlo methods) its standard error, 0 for deterministic ones. */
+    double *surface_radiance;
+    double *surface_stderr;
+    double samples;          /* samples per pixel / per surface, or sweeps */
+} rp_estimate;
+
+typedef struct rp_solver_type {
+    const char *name;
+    const char *summary;          /* one line for --help */
+    const rp_option_spec *options; /* terminated by a {NULL} entry */
+    size_t state_size;
+    rp_status (*init)(void *state, const rp_scene *scene, const rp_options *options,
+                      rp_error *err);
+    rp_status (*step)(void *state, rp_step_info *info, rp_error *err);
+    rp_status (*estimate)(const void *state, rp_estimate *estimate, rp_error *err);
+    void (*fini)(void *state);
+} rp_solver_type;
+
+/* A solver instance: its type and its state. */
+typedef struct rp_solver rp_solver;
+
+const rp_solver_type *rp_solver_lookup(const char *name);
+/* NULL-terminated list of every registered type. */
+const rp_solver_type *const *rp_solver_types(void);
+
+rp_status rp_solver_create(const rp_solver_type *type, const rp_scene *scene,
+                           const rp_options *options, rp_solver **out, rp_error *err);
+rp_status rp_solver_step(rp_solver *s, rp_step_info *info, rp_error *err);
+rp_status rp_solver_estimate(const rp_solver *s, rp_estimate *estimate, rp_error *err);
+const rp_solver_type *rp_solver_type_of(const rp_solver *s);
+void rp_solver_destroy(rp_solver *s);
+
+/* Option look-up for methods: the value given for name, or NULL. */
+const char *rp_options_get(const rp_options *o, const char *name);
+/* Parses a numeric option into *out (left alone when absent); a malformed
+ * or out-of-range value is RP_ERR_INPUT with a message naming the option. */
+rp_status rp_options_double(const rp_options *o, const char *name, double lo, double hi,
+                            double *out, rp_error *err);
+rp_status rp_options_uint(const rp_options *o, const char *name, unsigned long lo,
+                          unsigned long hi, unsigned long *out, rp_error *err);
+/* RP_ERR_INPUT if an option is not in the type's spec list. */
+rp_status rp_options_check(const rp_options *o, const rp_solver_type *type, rp_error *err);
+
+#endif
