@@ -40,7 +40,7 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off
 
-.PHONY: all deps test asan demo bench clean meshes
+.PHONY: all deps test check asan demo bench clean meshes
 all: radpt meshes
 
 radpt: $(BUILD)/radpt
@@ -71,13 +71,18 @@ scenes/data/%.off:
 	@mkdir -p scenes/data
 	tar -xzf $(CGAL_DATA) -O data/meshes/$*.off > $@.tmp && mv $@.tmp $@
 
+# `test` and `demo` first install what is missing, then build in a fresh
+# make (so pkg-config sees the newly installed packages).
+test: deps
+	@$(MAKE) --no-print-directory check
+
 # Criterion runs each test in its own process; two workers for two cores.
-test: $(BUILD)/tests/run $(BUILD)/radpt meshes
+check: $(BUILD)/tests/run $(BUILD)/radpt meshes
 	$(BUILD)/tests/run --jobs 2
 
-asan:
-	$(MAKE) BUILD=build-asan OPT=-O1 \
-	    SANITIZE="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined" test
+asan: deps
+	@$(MAKE) --no-print-directory BUILD=build-asan OPT=-O1 \
+	    SANITIZE="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined" check
 
 deps:
 	@missing=""; for p in $(DEB_PACKAGES); do \
@@ -89,8 +94,11 @@ deps:
 	    DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $$missing; \
 	else echo "all Debian packages present"; fi
 
-demo: radpt meshes
+demo: deps
+	@$(MAKE) --no-print-directory radpt meshes
 	./radpt info scenes/cornell.scene
+	@mkdir -p out
+	./radpt render scenes/cornell.scene --method pathtrace --spp 64 -o out/cornell.exr --png out/cornell.png
 
 bench: radpt meshes
 	./radpt info scenes/cornell.scene

@@ -1,0 +1,695 @@
+/* Image files: OpenEXR through the OpenEXRCore C API, sRGB PNG previews
+ * through libpng.  See image.h.
+ *
+ * Both writers go through the same atomic scheme: create PATH.tmp.PID.N with
+ * O_EXCL next to the target (same directory, so same file system), write
+ * and fsync it, then rename(2) it over PATH.  Any failure unlinks the
+ * temporary file, so PATH either holds a complete new image or is left as
+ * it was. */
+#include "image.h"
+
+#include <OpenEXR/openexr.h>
+#include <png.h>
+
+#include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+/* ---------------------------------------------------------------------
+ * Temporary files */
+
+/* Opens a fresh PATH.tmp.PID.N for writing; the name goes to *tmp_out
+ * (malloc'd).  Mode 0666 lets the umask decide the final permissions, as
+ * for any ordinary file the program creates. */
+static rp_status temp_open(const char *path, int *fd_out, char **tmp_out, rp_error *err)
+{
+    static atomic_uint counter;
+    size_t n = strlen(path) + 64;
+    char *tmp = malloc(n);
+    if (!tmp)
+        return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
+    for (int attempt = 0; attempt < 1000; attempt++) {
+        unsigned k = atomic_fetch_add(&counter, 1u);
+        snprintf(tmp, n, "%s.tmp.%ld.%u", path, (long)getpid(), k);
+        int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+        if (fd >= 0) {
+            *fd_out = fd;
+            *tmp_out = tmp;
+            return RP_OK;
+        }
+        if (errno != EEXIST)
+            break;
+    }
+    int e = errno;
+    free(tmp);
+    return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot create a temporary file: %s", path,
+                        strerror(e));
+}
+
+/* Flushes fd to disk, closes it and renames tmp to path; on failure removes
+ * tmp.  Always frees tmp. */
+static rp_status temp_commit(int fd, char *tmp, const char *path, rp_error *err)
+{
+    rp_status st = RP_OK;
+    if (fsync(fd) != 0)
+        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot flush: %s", path, strerror(errno));
+    if (close(fd) != 0 && st == RP_OK)
+        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot close: %s", path, strerror(errno));
+    if (st == RP_OK && rename(tmp, path) != 0)
+        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot rename the temporary file into place: %s",
+                          path, strerror(errno));
+    if (st != RP_OK)
+        unlink(tmp);
+    free(tmp);
+    return st;
+}
+
+/* Gives up on a temporary file. */
+static void temp_discard(int fd, char *tmp)
+{
+    if (fd >= 0)
+        close(fd);
+    if (tmp)
+        unlink(tmp);
+    free(tmp);
+}
+
+/* ---------------------------------------------------------------------
+ * OpenEXRCore glue */
+
+/* OpenEXRCore reports errors through a callback that by default prints to
+ * stderr.  Ours stores the first message of the current call in a
+ * thread-local buffer so it can go into the rp_error instead.  (The
+ * context's user_data is not usable for this when reading: the built-in
+ * file reader keeps its own handle there.) */
+typedef struct exr_capture {
+    char message[512];
+} exr_capture;
+
+static _Thread_local exr_capture *exr_current_capture;
+
+static void exr_capture_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
+{
+    (void)ctxt;
+    exr_capture *cap = exr_current_capture;
+    if (cap && cap->message[0] == '\0')
+        snprintf(cap->message, sizeof cap->message, "%s (%s)", msg ? msg : "",
+                 exr_get_error_code_as_string(code));
+}
+
+/* Message for a failed exr_* call: the captured text, else the library's
+ * generic text for the code. */
+static const char *exr_message(const exr_capture *cap, exr_result_t rv)
+{
+    return cap->message[0] ? cap->message : exr_get_default_error_message(rv);
+}
+
+/* Write sink: pwrite(2) onto the temporary file's descriptor. */
+typedef struct exr_sink {
+    int fd;
+} exr_sink;
+
+static int64_t exr_sink_write(exr_const_context_t ctxt, void *userdata, const void *buffer,
+                              uint64_t sz, uint64_t offset, exr_stream_error_func_ptr_t error_cb)
+{
+    const exr_sink *sink = userdata;
+    const unsigned char *p = buffer;
+    uint64_t done = 0;
+    while (done < sz) {
+        uint64_t chunk = sz - done;
+        if (chunk > (uint64_t)1 << 30)
+            chunk = (uint64_t)1 << 30;
+        if (offset + done > (uint64_t)INT64_MAX) {
+            if (error_cb)
+                error_cb(ctxt, EXR_ERR_WRITE_IO, "write offset out of range");
+            return -1;
+        }
+        ssize_t n = pwrite(sink->fd, p + done, (size_t)chunk, (off_t)(offset + done));
+        if (n < 0) {
+            if (errno == EINTR)
+                continue;
+            if (error_cb)
+                error_cb(ctxt, EXR_ERR_WRITE_IO, "cannot write %llu bytes: %s",
+                         (unsigned long long)chunk, strerror(errno));
+            return -1;
+        }
+        done += (uint64_t)n;
+    }
+    return (int64_t)done;
+}
+
+/* OpenEXR 2.0 and later allow names up to 255 bytes only with the long
+ * names flag; without it the limit is 31. */
+#define EXR_SHORT_NAME_MAX 31
+#define EXR_LONG_NAME_MAX 255
+
+static rp_status exr_check_image(const char *path, const rp_image *img, int *longnames,
+                                 rp_error *err)
+{
+    if (!path || !*path)
+        return rp_error_set(err, RP_ERR_INPUT, "EXR output: no file name");
+    if (!img)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: no image", path);
+    if (img->width == 0 || img->height == 0 || img->width > INT32_MAX / 2 ||
+        img->height > INT32_MAX / 2)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: image size %u x %u out of range", path,
+                            img->width, img->height);
+    if (img->nchannels == 0 || img->nchannels > INT16_MAX)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: %zu channels (need 1 to %d)", path,
+                            img->nchannels, INT16_MAX);
+    if (!img->channel_names || !img->planes)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: channel names or planes missing", path);
+    if (img->nattrs > 0 && !img->attrs)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: attributes missing", path);
+    *longnames = 0;
+    for (size_t c = 0; c < img->nchannels; c++) {
+        const char *name = img->channel_names[c];
+        if (!name || !*name)
+            return rp_error_set(err, RP_ERR_INPUT, "%s: channel %zu has no name", path, c);
+        if (!img->planes[c])
+            return rp_error_set(err, RP_ERR_INPUT, "%s: channel %s has no data", path, name);
+        size_t len = strlen(name);
+        if (len > EXR_LONG_NAME_MAX)
+            return rp_error_set(err, RP_ERR_INPUT, "%s: channel name %.40s... longer than %d bytes",
+                                path, name, EXR_LONG_NAME_MAX);
+        if (len > EXR_SHORT_NAME_MAX)
+            *longnames = 1;
+        for (size_t d = 0; d < c; d++)
+            if (strcmp(name, img->channel_names[d]) == 0)
+                return rp_error_set(err, RP_ERR_INPUT, "%s: channel %s appears twice", path, name);
+    }
+    for (size_t a = 0; a < img->nattrs; a++) {
+        const rp_image_attr *at = &img->attrs[a];
+        if (!at->name || !*at->name || !at->value)
+            return rp_error_set(err, RP_ERR_INPUT, "%s: attribute %zu has no name or value", path,
+                                a);
+        size_t len = strlen(at->name);
+        if (len > EXR_LONG_NAME_MAX)
+            return rp_error_set(err, RP_ERR_INPUT,
+                                "%s: attribute name %.40s... longer than %d bytes", path, at->name,
+                                EXR_LONG_NAME_MAX);
+        if (len > EXR_SHORT_NAME_MAX)
+            *longnames = 1;
+        if (strlen(at->value) > INT32_MAX / 2)
+            return rp_error_set(err, RP_ERR_INPUT, "%s: attribute %s too long", path, at->name);
+    }
+    return RP_OK;
+}
+
+/* Index of the image plane named name, or -1. */
+static long plane_index(const rp_image *img, const char *name)
+{
+    for (size_t c = 0; c < img->nchannels; c++)
+        if (strcmp(img->channel_names[c], name) == 0)
+            return (long)c;
+    return -1;
+}
+
+/* Header and pixels of one scanline part.  Returns the failing call's
+ * result, with *what naming the step. */
+static exr_result_t exr_write_image(exr_context_t ctx, const rp_image *img, int longnames,
+                                    const char **what)
+{
+    exr_result_t rv;
+    int part = 0;
+
+    *what = "add part";
+    if ((rv = exr_add_part(ctx, NULL, EXR_STORAGE_SCANLINE, &part)) != EXR_ERR_SUCCESS)
+        return rv;
+    /* ZIP: lossless deflate over 16-scanline blocks (OpenEXR file layout). */
+    *what = "set required attributes";
+    if ((rv = exr_initialize_required_attr_simple(ctx, part, (int32_t)img->width,
+                                                  (int32_t)img->height, EXR_COMPRESSION_ZIP)) !=
+        EXR_ERR_SUCCESS)
+        return rv;
+    if (longnames) {
+        *what = "enable long names";
+        if ((rv = exr_set_longname_support(ctx, 1)) != EXR_ERR_SUCCESS)
+            return rv;
+    }
+    *what = "add channel";
+    for (size_t c = 0; c < img->nchannels; c++)
+        if ((rv = exr_add_channel(ctx, part, img->channel_names[c], EXR_PIXEL_FLOAT,
+                                  EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1)) != EXR_ERR_SUCCESS)
+            return rv;
+    *what = "set attribute";
+    for (size_t a = 0; a < img->nattrs; a++)
+        if ((rv = exr_attr_set_string(ctx, part, img->attrs[a].name, img->attrs[a].value)) !=
+            EXR_ERR_SUCCESS)
+            return rv;
+    *what = "write header";
+    if ((rv = exr_write_header(ctx)) != EXR_ERR_SUCCESS)
+        return rv;
+
+    int32_t lines_per_chunk = 0;
+    *what = "query scanlines per chunk";
+    if ((rv = exr_get_scanlines_per_chunk(ctx, part, &lines_per_chunk)) != EXR_ERR_SUCCESS)
+        return rv;
+    if (lines_per_chunk <= 0)
+        return EXR_ERR_UNKNOWN;
+
+    exr_encode_pipeline_t enc;
+    memset(&enc, 0, sizeof enc);
+    int initialised = 0;
+    int32_t line_stride = (int32_t)(img->width * sizeof(float));
+    for (int32_t y = 0; y < (int32_t)img->height; y += lines_per_chunk) {
+        exr_chunk_info_t cinfo;
+        *what = "prepare chunk";
+        if ((rv = exr_write_scanline_chunk_info(ctx, part, y, &cinfo)) != EXR_ERR_SUCCESS)
+            break;
+        rv = initialised ? exr_encoding_update(ctx, part, &cinfo, &enc)
+                         : exr_encoding_initialize(ctx, part, &cinfo, &enc);
+        if (rv != EXR_ERR_SUCCESS)
+            break;
+        /* OpenEXRCore lists channels sorted by name, not in the order they
+         * were added: map each by name.  Pointers are set for every chunk;
+         * the last chunk may hold fewer lines than lines_per_chunk. */
+        for (int16_t c = 0; c < enc.channel_count; c++) {
+            exr_coding_channel_info_t *ch = &enc.channels[c];
+            long k = plane_index(img, ch->channel_name);
+            if (k < 0) {
+                *what = "match channel";
+                rv = EXR_ERR_UNKNOWN;
+                break;
+            }
+            ch->user_data_type = EXR_PIXEL_FLOAT;
+            ch->user_bytes_per_element = (int16_t)sizeof(float);
+            ch->user_pixel_stride = (int32_t)sizeof(float);
+            ch->user_line_stride = line_stride;
+            ch->encode_from_ptr =
+                (const uint8_t *)(img->planes[k] + (size_t)cinfo.start_y * img->width);
+        }
+        if (rv != EXR_ERR_SUCCESS)
+            break;
+        if (!initialised) {
+            *what = "choose encoder";
+            if ((rv = exr_encoding_choose_default_routines(ctx, part, &enc)) != EXR_ERR_SUCCESS)
+                break;
+            initialised = 1;
+        }
+        *what = "encode chunk";
+        if ((rv = exr_encoding_run(ctx, part, &enc)) != EXR_ERR_SUCCESS)
+            break;
+    }
+    if (initialised || enc.channels)
+        exr_encoding_destroy(ctx, &enc);
+    return rv;
+}
+
+rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *err)
+{
+    int longnames = 0;
+    rp_status st = exr_check_image(path, img, &longnames, err);
+    if (st != RP_OK)
+        return st;
+
+    int fd = -1;
+    char *tmp = NULL;
+    if ((st = temp_open(path, &fd, &tmp, err)) != RP_OK)
+        return st;
+
+    exr_capture cap = {{0}};
+    exr_capture *saved = exr_current_capture;
+    exr_current_capture = &cap;
+
+    exr_sink sink = {fd};
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_capture_error;
+    init.user_data = &sink;
+    init.write_fn = exr_sink_write;
+
+    exr_context_t ctx = NULL;
+    const char *what = "start writing";
+    exr_result_t rv = exr_start_write(&ctx, tmp, EXR_WRITE_FILE_DIRECTLY, &init);
+    if (rv == EXR_ERR_SUCCESS)
+        rv = exr_write_image(ctx, img, longnames, &what);
+    if (ctx) {
+        /* exr_finish writes the chunk offset table, so its result counts. */
+        exr_result_t frv = exr_finish(&ctx);
+        if (rv == EXR_ERR_SUCCESS && frv != EXR_ERR_SUCCESS) {
+            rv = frv;
+            what = "finish";
+        }
+    }
+    exr_current_capture = saved;
+
+    if (rv != EXR_ERR_SUCCESS) {
+        temp_discard(fd, tmp);
+        return rp_error_set(err, RP_ERR_RUNTIME, "%s: OpenEXR %s failed: %s", path, what,
+                            exr_message(&cap, rv));
+    }
+    return temp_commit(fd, tmp, path, err);
+}
+
+/* Decodes every channel of part 0 into the planes (width * height floats
+ * each, in the order of chlist). */
+static exr_result_t exr_read_pixels(exr_context_t ctx, const exr_attr_box2i_t *dw,
+                                    const exr_attr_chlist_t *chlist, float **planes,
+                                    const char **what)
+{
+    exr_result_t rv;
+    int32_t lines_per_chunk = 0;
+    *what = "query scanlines per chunk";
+    if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines_per_chunk)) != EXR_ERR_SUCCESS)
+        return rv;
+    if (lines_per_chunk <= 0)
+        return EXR_ERR_CORRUPT_CHUNK;
+
+    size_t width = (size_t)((int64_t)dw->max.x - dw->min.x + 1);
+    exr_decode_pipeline_t dec;
+    memset(&dec, 0, sizeof dec);
+    int initialised = 0;
+    for (int64_t y = dw->min.y; y <= dw->max.y; y += lines_per_chunk) {
+        exr_chunk_info_t cinfo;
+        *what = "read chunk";
+        if ((rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo)) != EXR_ERR_SUCCESS)
+            break;
+        rv = initialised ? exr_decoding_update(ctx, 0, &cinfo, &dec)
+                         : exr_decoding_initialize(ctx, 0, &cinfo, &dec);
+        if (rv != EXR_ERR_SUCCESS)
+            break;
+        for (int16_t c = 0; c < dec.channel_count; c++) {
+            exr_coding_channel_info_t *ch = &dec.channels[c];
+            long k = -1;
+            for (int j = 0; j < chlist->num_channels; j++)
+                if (strcmp(chlist->entries[j].name.str, ch->channel_name) == 0)
+                    k = j;
+            if (k < 0) {
+                *what = "match channel";
+                rv = EXR_ERR_CORRUPT_CHUNK;
+                break;
+            }
+            /* Whatever the stored type (half, float, uint), ask for float. */
+            ch->user_data_type = EXR_PIXEL_FLOAT;
+            ch->user_bytes_per_element = (int16_t)sizeof(float);
+            ch->user_pixel_stride = (int32_t)sizeof(float);
+            ch->user_line_stride = (int32_t)(width * sizeof(float));
+            ch->decode_to_ptr =
+                (uint8_t *)(planes[k] + (size_t)((int64_t)cinfo.start_y - dw->min.y) * width);
+        }
+        if (rv != EXR_ERR_SUCCESS)
+            break;
+        if (!initialised) {
+            *what = "choose decoder";
+            if ((rv = exr_decoding_choose_default_routines(ctx, 0, &dec)) != EXR_ERR_SUCCESS)
+                break;
+            initialised = 1;
+        }
+        *what = "decode chunk";
+        if ((rv = exr_decoding_run(ctx, 0, &dec)) != EXR_ERR_SUCCESS)
+            break;
+    }
+    if (initialised || dec.channels)
+        exr_decoding_destroy(ctx, &dec);
+    return rv;
+}
+
+static void free_planes(size_t n, char **names, float **planes)
+{
+    for (size_t c = 0; c < n; c++) {
+        if (names)
+            free(names[c]);
+        if (planes)
+            free(planes[c]);
+    }
+    free(names);
+    free(planes);
+}
+
+rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
+                            size_t *nchannels, char ***names, float ***planes, rp_error *err)
+{
+    if (!path || !width || !height || !nchannels || !names || !planes)
+        return rp_error_set(err, RP_ERR_INPUT, "EXR input: missing argument");
+    *width = *height = 0;
+    *nchannels = 0;
+    *names = NULL;
+    *planes = NULL;
+
+    exr_capture cap = {{0}};
+    exr_capture *saved = exr_current_capture;
+    exr_current_capture = &cap;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_capture_error;
+
+    rp_status st = RP_OK;
+    exr_context_t ctx = NULL;
+    const char *what = "open";
+    char **nm = NULL;
+    float **pl = NULL;
+    size_t n = 0;
+    exr_result_t rv = exr_start_read(&ctx, path, &init);
+    if (rv != EXR_ERR_SUCCESS)
+        goto exr_failed;
+
+    exr_storage_t storage;
+    what = "query storage";
+    if ((rv = exr_get_storage(ctx, 0, &storage)) != EXR_ERR_SUCCESS)
+        goto exr_failed;
+    if (storage != EXR_STORAGE_SCANLINE) {
+        st = rp_error_set(err, RP_ERR_UNSUPPORTED,
+                          "%s: only scanline EXR images are supported (this one is tiled or deep)",
+                          path);
+        goto done;
+    }
+    exr_attr_box2i_t dw;
+    what = "query data window";
+    if ((rv = exr_get_data_window(ctx, 0, &dw)) != EXR_ERR_SUCCESS)
+        goto exr_failed;
+    int64_t w = (int64_t)dw.max.x - dw.min.x + 1, h = (int64_t)dw.max.y - dw.min.y + 1;
+    if (w <= 0 || h <= 0 || w > UINT32_MAX || h > UINT32_MAX ||
+        (uint64_t)w > SIZE_MAX / sizeof(float) / (uint64_t)h) {
+        st = rp_error_set(err, RP_ERR_INPUT, "%s: data window out of range", path);
+        goto done;
+    }
+    const exr_attr_chlist_t *chlist = NULL;
+    what = "query channels";
+    if ((rv = exr_get_channels(ctx, 0, &chlist)) != EXR_ERR_SUCCESS)
+        goto exr_failed;
+    if (!chlist || chlist->num_channels <= 0) {
+        st = rp_error_set(err, RP_ERR_INPUT, "%s: no channels", path);
+        goto done;
+    }
+    for (int j = 0; j < chlist->num_channels; j++)
+        if (chlist->entries[j].x_sampling != 1 || chlist->entries[j].y_sampling != 1) {
+            st = rp_error_set(err, RP_ERR_UNSUPPORTED, "%s: channel %s is subsampled", path,
+                              chlist->entries[j].name.str);
+            goto done;
+        }
+
+    size_t count = (size_t)chlist->num_channels;
+    size_t npix = (size_t)w * (size_t)h;
+    nm = calloc(count, sizeof *nm);
+    pl = calloc(count, sizeof *pl);
+    if (!nm || !pl) {
+        st = rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
+        goto done;
+    }
+    n = count;
+    for (size_t c = 0; c < count; c++) {
+        const exr_attr_string_t *s = &chlist->entries[c].name;
+        nm[c] = malloc((size_t)s->length + 1);
+        pl[c] = malloc(npix * sizeof(float));
+        if (!nm[c] || !pl[c]) {
+            st = rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
+            goto done;
+        }
+        memcpy(nm[c], s->str, (size_t)s->length);
+        nm[c][s->length] = '\0';
+    }
+    if ((rv = exr_read_pixels(ctx, &dw, chlist, pl, &what)) != EXR_ERR_SUCCESS)
+        goto exr_failed;
+
+    *width = (uint32_t)w;
+    *height = (uint32_t)h;
+    *nchannels = count;
+    *names = nm;
+    *planes = pl;
+    nm = NULL;
+    pl = NULL;
+    n = 0;
+    goto done;
+
+exr_failed:
+    /* A missing or non-EXR file is the caller's bad input (exit 2). */
+    st = rp_error_set(err,
+                      rv == EXR_ERR_FILE_ACCESS || rv == EXR_ERR_FILE_BAD_HEADER ? RP_ERR_INPUT
+                                                                                  : RP_ERR_RUNTIME,
+                      "%s: OpenEXR %s failed: %s", path, what, exr_message(&cap, rv));
+done:
+    free_planes(n, nm, pl);
+    if (ctx)
+        exr_finish(&ctx);
+    exr_current_capture = saved;
+    return st;
+}
+
+char *rp_image_read_exr_attr(const char *path, const char *name)
+{
+    if (!path || !name)
+        return NULL;
+    /* Failures here mean "no such attribute": capture and drop messages. */
+    exr_capture cap = {{0}};
+    exr_capture *saved = exr_current_capture;
+    exr_current_capture = &cap;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_capture_error;
+    init.flags = EXR_CONTEXT_FLAG_SILENT_HEADER_PARSE;
+
+    char *copy = NULL;
+    exr_context_t ctx = NULL;
+    if (exr_start_read(&ctx, path, &init) == EXR_ERR_SUCCESS) {
+        const exr_attribute_t *attr = NULL;
+        if (exr_get_attribute_by_name(ctx, 0, name, &attr) == EXR_ERR_SUCCESS && attr &&
+            attr->type == EXR_ATTR_STRING) {
+            int32_t len = 0;
+            const char *s = NULL;
+            if (exr_attr_get_string(ctx, 0, name, &len, &s) == EXR_ERR_SUCCESS && s && len >= 0 &&
+                (copy = malloc((size_t)len + 1)) != NULL) {
+                memcpy(copy, s, (size_t)len);
+                copy[len] = '\0';
+            }
+        }
+    }
+    if (ctx)
+        exr_finish(&ctx);
+    exr_current_capture = saved;
+    return copy;
+}
+
+/* ---------------------------------------------------------------------
+ * PNG preview */
+
+/* Linear value to an 8-bit sRGB code: IEC 61966-2-1 transfer function,
+ * 12.92 v below 0.0031308, else 1.055 v^(1/2.4) - 0.055; clamped to
+ * [0, 1] first (NaN counts as 0), rounded to nearest. */
+static uint8_t srgb_encode8(double v)
+{
+    if (!(v > 0.0))
+        return 0;
+    if (v >= 1.0)
+        return 255;
+    double e = v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055;
+    return (uint8_t)floor(255.0 * e + 0.5);
+}
+
+typedef struct png_capture {
+    char message[256];
+} png_capture;
+
+/* libpng's default handlers print to stderr (and the error one aborts
+ * without a jump buffer): store the message and jump back instead. */
+static void png_capture_error(png_structp png, png_const_charp msg)
+{
+    png_capture *cap = png_get_error_ptr(png);
+    if (cap)
+        snprintf(cap->message, sizeof cap->message, "%s", msg ? msg : "libpng error");
+    png_longjmp(png, 1);
+}
+
+static void png_ignore_warning(png_structp png, png_const_charp msg)
+{
+    (void)png;
+    (void)msg;
+}
+
+/* Everything that touches libpng after setjmp, kept in one function so no
+ * local of the caller changes between setjmp and a longjmp. */
+static int png_encode(png_structp png, png_infop info, FILE *fp, uint32_t width, uint32_t height,
+                      const float *r, const float *g, const float *b, double exposure,
+                      unsigned char *row)
+{
+    if (setjmp(png_jmpbuf(png)))
+        return -1;
+    png_init_io(png, fp);
+    png_set_IHDR(png, info, width, height, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+                 PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+    /* Tag the file as sRGB (with matching gAMA/cHRM for older readers). */
+    png_set_sRGB_gAMA_and_cHRM(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
+    png_write_info(png, info);
+    for (uint32_t y = 0; y < height; y++) {
+        size_t base = (size_t)y * width;
+        for (uint32_t x = 0; x < width; x++) {
+            row[3 * (size_t)x + 0] = srgb_encode8(exposure * (double)r[base + x]);
+            row[3 * (size_t)x + 1] = srgb_encode8(exposure * (double)g[base + x]);
+            row[3 * (size_t)x + 2] = srgb_encode8(exposure * (double)b[base + x]);
+        }
+        png_write_row(png, row);
+    }
+    png_write_end(png, info);
+    return 0;
+}
+
+rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
+                             const float *r, const float *g, const float *b,
+                             double exposure, rp_error *err)
+{
+    if (!path || !*path)
+        return rp_error_set(err, RP_ERR_INPUT, "PNG output: no file name");
+    if (!r || !g || !b)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: missing colour plane", path);
+    /* PNG allows up to 2^31 - 1 per side (PNG spec, IHDR); libpng's default
+     * user limit is 10^6. */
+    if (width == 0 || height == 0 || width > 1000000 || height > 1000000)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: image size %u x %u out of range", path, width,
+                            height);
+    if (!isfinite(exposure) || exposure < 0.0)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: exposure %g is not a finite value >= 0", path,
+                            exposure);
+
+    unsigned char *row = malloc(3 * (size_t)width);
+    if (!row)
+        return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
+
+    int fd = -1;
+    char *tmp = NULL;
+    rp_status st = temp_open(path, &fd, &tmp, err);
+    if (st != RP_OK) {
+        free(row);
+        return st;
+    }
+    /* A duplicate descriptor for stdio, so fclose leaves fd for fsync. */
+    int fd2 = dup(fd);
+    FILE *fp = fd2 >= 0 ? fdopen(fd2, "wb") : NULL;
+    if (!fp) {
+        int e = errno;
+        if (fd2 >= 0)
+            close(fd2);
+        free(row);
+        temp_discard(fd, tmp);
+        return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot open stream: %s", path, strerror(e));
+    }
+
+    png_capture cap = {{0}};
+    png_structp png =
+        png_create_write_struct(PNG_LIBPNG_VER_STRING, &cap, png_capture_error, png_ignore_warning);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    int rc = -1;
+    if (png && info)
+        rc = png_encode(png, info, fp, width, height, r, g, b, exposure, row);
+    else
+        snprintf(cap.message, sizeof cap.message, "cannot create libpng structures");
+    png_destroy_write_struct(png ? &png : NULL, info ? &info : NULL);
+    free(row);
+
+    if (rc == 0 && fflush(fp) != 0) {
+        rc = -1;
+        snprintf(cap.message, sizeof cap.message, "%s", strerror(errno));
+    }
+    if (fclose(fp) != 0 && rc == 0) {
+        rc = -1;
+        snprintf(cap.message, sizeof cap.message, "%s", strerror(errno));
+    }
+    if (rc != 0) {
+        temp_discard(fd, tmp);
+        return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot write PNG: %s", path, cap.message);
+    }
+    return temp_commit(fd, tmp, path, err);
+}
