@@ -20,7 +20,7 @@ GSL_LIBS   := $(shell pkg-config --libs gsl 2>/dev/null || echo -lgsl -lgslcblas
 
 OPT      ?= -O2
 SANITIZE ?=
-CPPFLAGS := -I. $(GSL_CFLAGS) -D_POSIX_C_SOURCE=200809L
+CPPFLAGS := -I. $(GSL_CFLAGS) -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
 CFLAGS   := -std=c11 $(OPT) -g -Wall -Wextra -Werror -fopenmp -MMD -MP $(SANITIZE)
 # CGAL is heavy to compile: no -g, one or two translation units.
 CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(SANITIZE)

@@ -4,6 +4,8 @@
 
 #include <math.h>
 
+#define RP_PI 3.14159265358979323846
+
 typedef struct rp_vec3 {
     double x, y, z;
 } rp_vec3;
