@@ -1,0 +1,1558 @@
+/* The scene model and its two readers: scene format 1 (DESIGN.md, "Scene
+ * files") and Wavefront OBJ/MTL through the CGAL shim.
+ *
+ * Choices the format leaves open, made here:
+ *
+ * - A scene without a `bands` statement is grey (one band).
+ * - Statements may come in any order except that `bands` precedes every
+ *   material and a material is declared before a surface uses it.  At most
+ *   one `bands` and one `camera` statement.  Paths (include, mesh) contain no
+ *   white space and are relative to the directory of the file naming them.
+ * - Numbers are whole tokens read by strtod (decimal, no hex); NaN and
+ *   infinities are refused.
+ * - `reflect` / `emit` spectra `nm:value` are piecewise linear, constant
+ *   beyond the end points, and reduced to the scene's bands as follows:
+ *   spectral: sampled at each band's wavelength; grey: mean over 400-700 nm;
+ *   rgb: box means, B over 400-500, G over 500-600, R over 600-700 nm.  The
+ *   box filter is a crude stand-in for colour matching, but it keeps
+ *   reflectance in [0, 1), maps a flat spectrum to the same value in every
+ *   band, and maps the Cornell light's measured emission (400:0 500:8
+ *   600:15.6 700:18.4) to (17, 11.8, 4), the RGB radiance in common use.
+ * - Degenerate faces: a triangle whose edge vectors have a cross product
+ *   below 1e-10 of its longest edge squared (angle below 1e-10 rad) or a
+ *   quad whose diagonals do likewise; and any face with area below
+ *   (1e-7 * scene diagonal)^2, i.e. smaller than the weld tolerance that
+ *   rp_scene_is_closed uses.
+ * - Quads: planar when the two diagonals are at most 1e-6 of the longer
+ *   diagonal apart along the quad's normal (the normal is the direction of
+ *   diagonal x diagonal, so the twist is |(v1 - v0) . n|).  At that twist the
+ *   area formula (half the diagonals' cross product) and the bilinear
+ *   parametrisation are off by O(1e-12) relative; any quad written with 7
+ *   or more significant digits passes, and the Cornell red wall (one corner
+ *   3.2 mm off the plane of the others) is refused.  Convex when every
+ *   corner turns the same way as the normal, by more than 1e-10 rad.
+ * - Meshes: degenerate faces (dropped by the reader) and edges used twice
+ *   in the same direction are errors, never silently repaired.
+ * - OBJ scenes are rgb, without a camera.  Each (group, MTL material) pair
+ *   is a surface named after the group, or "group.material" when the group
+ *   mixes materials; Kd is reflect (must lie in [0, 1)), Ke is emit.  A
+ *   face without a material is refused: no default reflectance is made up.
+ *   The OBJ reader gives no line numbers, so its messages are "FILE: ...". */
+/* realpath (include cycles) is an X/Open extension in glibc. */
+#define _XOPEN_SOURCE 700
+
+#include "scene.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cgal/import.h"
+
+#define RELATIVE_COLLINEAR 1e-10 /* sine of the smallest corner angle */
+#define RELATIVE_TWIST 1e-6      /* quad twist / longest diagonal */
+#define RELATIVE_WELD 1e-7       /* weld tolerance / scene diagonal */
+#define MAX_INCLUDE_DEPTH 64
+#define MAX_IMAGE_SIZE 65536
+
+/* The grey and RGB reductions of a spectrum (see the comment above). */
+#define VISIBLE_LO 400.0
+#define VISIBLE_HI 700.0
+
+struct rp_scene {
+    rp_band_kind band_kind;
+    size_t nbands;
+    double *wavelengths;
+
+    rp_material *materials; /* names, rho, Le owned */
+    size_t nmaterials, cap_materials;
+    rp_surface *surfaces; /* names owned; file points into files */
+    size_t nsurfaces, cap_surfaces;
+    rp_face *faces;
+    size_t nfaces, cap_faces;
+    rp_vec3 *vertices;
+    size_t nvertices, cap_vertices;
+
+    int has_camera;
+    rp_camera camera;
+
+    char **files; /* every file name a surface or camera may cite */
+    size_t nfiles, cap_files;
+
+    rp_vec3 lo, hi;
+    double total_area;
+};
+
+/* ---------------------------------------------------------------- memory */
+
+static int grow(void **p, size_t *cap, size_t need, size_t elem)
+{
+    if (need <= *cap)
+        return 1;
+    size_t n = *cap ? *cap : 16;
+    while (n < need) {
+        if (n > SIZE_MAX / 2 / elem)
+            return 0;
+        n *= 2;
+    }
+    void *q = realloc(*p, n * elem);
+    if (!q)
+        return 0;
+    *p = q;
+    *cap = n;
+    return 1;
+}
+
+static char *dup_string(const char *s)
+{
+    size_t n = strlen(s) + 1;
+    char *d = malloc(n);
+    if (d)
+        memcpy(d, s, n);
+    return d;
+}
+
+void rp_scene_destroy(rp_scene *s)
+{
+    if (!s)
+        return;
+    free(s->wavelengths);
+    for (size_t i = 0; i < s->nmaterials; i++) {
+        free((void *)s->materials[i].name);
+        free((void *)s->materials[i].rho);
+        free((void *)s->materials[i].Le);
+    }
+    free(s->materials);
+    for (size_t i = 0; i < s->nsurfaces; i++)
+        free((void *)s->surfaces[i].name);
+    free(s->surfaces);
+    free(s->faces);
+    free(s->vertices);
+    for (size_t i = 0; i < s->nfiles; i++)
+        free(s->files[i]);
+    free(s->files);
+    free(s);
+}
+
+static rp_scene *scene_new(void)
+{
+    rp_scene *s = calloc(1, sizeof *s);
+    if (!s)
+        return NULL;
+    s->band_kind = RP_BANDS_GREY;
+    s->nbands = 1;
+    return s;
+}
+
+/* ---------------------------------------------------------------- parser */
+
+/* One file being read: its name for messages, its directory for paths. */
+typedef struct source {
+    const char *name; /* owned by the scene's file list */
+    char *dir;        /* NULL: current directory */
+    int depth;
+} source;
+
+typedef struct parser {
+    rp_scene *s;
+    rp_error *err;
+    char **stack; /* canonical paths of the files being read (cycles) */
+    size_t nstack, cap_stack;
+    int bands_declared;
+    const char *bands_file;
+    int bands_line;
+    const char *camera_file;
+    int camera_line;
+} parser;
+
+static rp_status failv(parser *p, rp_status st, const char *file, int line, const char *fmt, va_list ap)
+{
+    char what[768];
+    vsnprintf(what, sizeof what, fmt, ap);
+    if (line > 0)
+        return rp_error_set(p->err, st, "%s:%d: %s", file, line, what);
+    return rp_error_set(p->err, st, "%s: %s", file, what);
+}
+
+#if defined(__GNUC__)
+__attribute__((format(printf, 4, 5)))
+#endif
+static rp_status fail(parser *p, const char *file, int line, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    rp_status st = failv(p, RP_ERR_INPUT, file, line, fmt, ap);
+    va_end(ap);
+    return st;
+}
+
+static rp_status nomem(parser *p)
+{
+    return rp_error_set(p->err, RP_ERR_NOMEM, "out of memory while reading the scene");
+}
+
+/* Keeps a copy of a file name for the scene's lifetime. */
+static const char *keep_file_name(parser *p, const char *name)
+{
+    rp_scene *s = p->s;
+    if (!grow((void **)&s->files, &s->cap_files, s->nfiles + 1, sizeof *s->files))
+        return NULL;
+    char *d = dup_string(name);
+    if (!d)
+        return NULL;
+    s->files[s->nfiles++] = d;
+    return d;
+}
+
+/* dir/path, or path itself when absolute or dir is NULL. */
+static char *join_path(const char *dir, const char *path)
+{
+    if (!dir || !*dir || path[0] == '/')
+        return dup_string(path);
+    size_t a = strlen(dir), b = strlen(path);
+    char *r = malloc(a + b + 2);
+    if (!r)
+        return NULL;
+    memcpy(r, dir, a);
+    r[a] = '/';
+    memcpy(r + a + 1, path, b + 1);
+    return r;
+}
+
+/* The directory part of path; NULL (the current directory) when there is
+ * none, so that messages name "x.inc" rather than "./x.inc".  *ok is 0
+ * when memory ran out. */
+static char *dir_name(const char *path, int *ok)
+{
+    const char *slash = strrchr(path, '/');
+    *ok = 1;
+    if (!slash)
+        return NULL;
+    *ok = 0;
+    size_t n = slash == path ? 1 : (size_t)(slash - path); /* "/x" lives in "/" */
+    char *r = malloc(n + 1);
+    if (!r)
+        return NULL;
+    memcpy(r, path, n);
+    r[n] = '\0';
+    *ok = 1;
+    return r;
+}
+
+/* Reads a whole file; NULL with errno set on failure. */
+static char *read_text(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    size_t cap = 1 << 16, n = 0;
+    char *buf = malloc(cap);
+    while (buf) {
+        if (n + 1 >= cap) {
+            char *q = cap > SIZE_MAX / 2 ? NULL : realloc(buf, cap * 2);
+            if (!q) {
+                free(buf);
+                buf = NULL;
+                errno = ENOMEM;
+                break;
+            }
+            buf = q;
+            cap *= 2;
+        }
+        size_t got = fread(buf + n, 1, cap - 1 - n, f);
+        n += got;
+        if (got == 0) {
+            if (ferror(f)) {
+                free(buf);
+                buf = NULL;
+                errno = EIO;
+            }
+            break;
+        }
+    }
+    fclose(f);
+    if (buf) {
+        buf[n] = '\0';
+        if (memchr(buf, '\0', n)) {
+            /* A NUL byte: not a text file.  Reported by the caller as EILSEQ. */
+            free(buf);
+            errno = EILSEQ;
+            return NULL;
+        }
+    }
+    return buf;
+}
+
+/* A whole-token decimal number.  Returns 1 and sets *v, 0 for "not a
+ * number", -1 for a number that is NaN or infinite (or overflows). */
+static int parse_number(const char *tok, double *v)
+{
+    if (!*tok || strchr(tok, 'x') || strchr(tok, 'X'))
+        return 0;
+    char *end;
+    errno = 0;
+    double x = strtod(tok, &end);
+    if (end == tok || *end)
+        return 0;
+    if (!isfinite(x))
+        return -1;
+    *v = x;
+    return 1;
+}
+
+static rp_status number(parser *p, const source *src, int line, const char *tok, double *v)
+{
+    int r = parse_number(tok, v);
+    if (r > 0)
+        return RP_OK;
+    if (r < 0)
+        return fail(p, src->name, line, "'%.64s' is not a finite number", tok);
+    return fail(p, src->name, line, "'%.64s' is not a number", tok);
+}
+
+static rp_status numbers(parser *p, const source *src, int line, char **tok, size_t n, double *v)
+{
+    for (size_t i = 0; i < n; i++) {
+        rp_status st = number(p, src, line, tok[i], &v[i]);
+        if (st)
+            return st;
+    }
+    return RP_OK;
+}
+
+static const char *band_word(const rp_scene *s)
+{
+    switch (s->band_kind) {
+    case RP_BANDS_GREY: return "grey";
+    case RP_BANDS_RGB: return "rgb";
+    case RP_BANDS_SPECTRAL: return "spectral";
+    }
+    return "?";
+}
+
+/* ------------------------------------------------------------- spectra */
+
+/* The piecewise linear spectrum through (nm[k], val[k]), constant beyond
+ * the ends. */
+static double spectrum_at(const double *nm, const double *val, size_t n, double x)
+{
+    if (x <= nm[0])
+        return val[0];
+    if (x >= nm[n - 1])
+        return val[n - 1];
+    size_t k = 1;
+    while (nm[k] < x)
+        k++;
+    double t = (x - nm[k - 1]) / (nm[k] - nm[k - 1]);
+    return val[k - 1] + t * (val[k] - val[k - 1]);
+}
+
+/* Mean of the spectrum over [a, b]: trapezoids between the knots inside
+ * the interval, exact for a piecewise linear function. */
+static double spectrum_mean(const double *nm, const double *val, size_t n, double a, double b)
+{
+    double sum = 0, x = a, fx = spectrum_at(nm, val, n, a);
+    for (size_t k = 0; k <= n; k++) {
+        double next = k < n ? nm[k] : b;
+        if (next <= x)
+            continue;
+        if (next > b)
+            next = b;
+        double fn = spectrum_at(nm, val, n, next);
+        sum += 0.5 * (fx + fn) * (next - x);
+        x = next;
+        fx = fn;
+        if (x >= b)
+            break;
+    }
+    return sum / (b - a);
+}
+
+static void spectrum_to_bands(const rp_scene *s, const double *nm, const double *val, size_t n, double *out)
+{
+    switch (s->band_kind) {
+    case RP_BANDS_GREY:
+        out[0] = spectrum_mean(nm, val, n, VISIBLE_LO, VISIBLE_HI);
+        break;
+    case RP_BANDS_RGB:
+        out[0] = spectrum_mean(nm, val, n, 600.0, 700.0);
+        out[1] = spectrum_mean(nm, val, n, 500.0, 600.0);
+        out[2] = spectrum_mean(nm, val, n, 400.0, 500.0);
+        break;
+    case RP_BANDS_SPECTRAL:
+        for (size_t i = 0; i < s->nbands; i++)
+            out[i] = spectrum_at(nm, val, n, s->wavelengths[i]);
+        break;
+    }
+}
+
+/* ----------------------------------------------------------- statements */
+
+static rp_status st_bands(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    rp_scene *s = p->s;
+    if (p->bands_declared)
+        return fail(p, src->name, line, "second 'bands' statement (the first is at %s:%d)", p->bands_file,
+                    p->bands_line);
+    if (s->nmaterials > 0)
+        return fail(p, src->name, line, "'bands' must come before every material ('%s' is already declared)",
+                    s->materials[0].name);
+    if (ntok < 2)
+        return fail(p, src->name, line, "'bands' needs grey, rgb or a list of wavelengths in nm");
+    if (!strcmp(tok[1], "grey") || !strcmp(tok[1], "gray") || !strcmp(tok[1], "rgb")) {
+        if (ntok != 2)
+            return fail(p, src->name, line, "'bands %s' takes nothing after it", tok[1]);
+        s->band_kind = tok[1][0] == 'r' ? RP_BANDS_RGB : RP_BANDS_GREY;
+        s->nbands = tok[1][0] == 'r' ? 3 : 1;
+    } else {
+        size_t n = ntok - 1;
+        double *w = malloc(n * sizeof *w);
+        if (!w)
+            return nomem(p);
+        rp_status st = numbers(p, src, line, tok + 1, n, w);
+        for (size_t i = 0; !st && i < n; i++) {
+            if (w[i] <= 0)
+                st = fail(p, src->name, line, "wavelength %g nm is not positive", w[i]);
+            else if (i > 0 && w[i] <= w[i - 1])
+                st = fail(p, src->name, line, "wavelengths are not ascending (%g after %g)", w[i], w[i - 1]);
+        }
+        if (st) {
+            free(w);
+            return st;
+        }
+        s->band_kind = RP_BANDS_SPECTRAL;
+        s->nbands = n;
+        s->wavelengths = w;
+    }
+    p->bands_declared = 1;
+    p->bands_file = src->name;
+    p->bands_line = line;
+    return RP_OK;
+}
+
+/* A keyword ends a list of numbers: a token that starts like a word and
+ * is not "nan" or "inf" (those are numbers, refused as not finite). */
+static int is_word(const char *tok)
+{
+    double v;
+    return (isalpha((unsigned char)tok[0]) || tok[0] == '_') && parse_number(tok, &v) == 0;
+}
+
+/* Reads the values after `reflect` or `emit` starting at tok[*i] into
+ * out[nbands]; kind is "reflect" or "emit". */
+static rp_status material_values(parser *p, const source *src, int line, char **tok, size_t ntok, size_t *i,
+                                 const char *kind, double *out)
+{
+    rp_scene *s = p->s;
+    int reflect = kind[0] == 'r';
+    size_t j = *i;
+    rp_status st = RP_OK;
+    if (j < ntok && !strcmp(tok[j], "spectrum")) {
+        j++;
+        size_t first = j;
+        while (j < ntok && !is_word(tok[j]))
+            j++;
+        size_t n = j - first;
+        if (n == 0)
+            return fail(p, src->name, line, "'%s spectrum' needs points nm:value", kind);
+        double *nm = malloc(2 * n * sizeof *nm);
+        if (!nm)
+            return nomem(p);
+        double *val = nm + n;
+        for (size_t k = 0; !st && k < n; k++) {
+            const char *t = tok[first + k];
+            const char *colon = strchr(t, ':');
+            char left[128];
+            size_t ll = colon ? (size_t)(colon - t) : 0;
+            if (!colon || strchr(colon + 1, ':') || ll == 0 || ll >= sizeof left || parse_number(colon + 1, &val[k]) <= 0) {
+                st = fail(p, src->name, line, "malformed spectrum point '%.64s' (expected nm:value)", t);
+                break;
+            }
+            memcpy(left, t, ll);
+            left[ll] = '\0';
+            if (parse_number(left, &nm[k]) <= 0 || nm[k] <= 0)
+                st = fail(p, src->name, line, "malformed spectrum point '%.64s' (expected nm:value)", t);
+            else if (k > 0 && nm[k] <= nm[k - 1])
+                st = fail(p, src->name, line, "spectrum wavelengths are not ascending ('%.64s' after %g nm)", t,
+                          nm[k - 1]);
+            else if (reflect && (val[k] < 0 || val[k] >= 1))
+                st = fail(p, src->name, line, "reflect %g at %g nm outside [0, 1)", val[k], nm[k]);
+            else if (!reflect && val[k] < 0)
+                st = fail(p, src->name, line, "negative emit %g at %g nm", val[k], nm[k]);
+        }
+        if (!st)
+            spectrum_to_bands(s, nm, val, n, out);
+        free(nm);
+        *i = j;
+        return st;
+    }
+    size_t first = j;
+    while (j < ntok && !is_word(tok[j]))
+        j++;
+    size_t n = j - first;
+    if (n != 1 && n != s->nbands) {
+        if (s->nbands == 1)
+            return fail(p, src->name, line, "'%s' has %zu values; this grey scene needs 1", kind, n);
+        return fail(p, src->name, line, "'%s' has %zu values; this %s scene needs 1 or %zu (or 'spectrum')", kind, n,
+                    band_word(s), s->nbands);
+    }
+    for (size_t k = 0; k < n; k++) {
+        double v;
+        st = number(p, src, line, tok[first + k], &v);
+        if (st)
+            return st;
+        if (reflect && (v < 0 || v >= 1))
+            return fail(p, src->name, line, "reflect %g outside [0, 1)", v);
+        if (!reflect && v < 0)
+            return fail(p, src->name, line, "negative emit %g", v);
+        out[k] = v;
+    }
+    if (n == 1)
+        for (size_t k = 1; k < s->nbands; k++)
+            out[k] = out[0];
+    *i = j;
+    return RP_OK;
+}
+
+static uint32_t find_material(const rp_scene *s, const char *name)
+{
+    for (size_t i = 0; i < s->nmaterials; i++)
+        if (!strcmp(s->materials[i].name, name))
+            return (uint32_t)i;
+    return RP_NONE;
+}
+
+/* Adds a material with fresh zeroed rho and Le; returns its index. */
+static rp_status add_material(parser *p, const char *name, uint32_t *index)
+{
+    rp_scene *s = p->s;
+    if (!grow((void **)&s->materials, &s->cap_materials, s->nmaterials + 1, sizeof *s->materials))
+        return nomem(p);
+    rp_material *m = &s->materials[s->nmaterials];
+    memset(m, 0, sizeof *m);
+    m->name = dup_string(name);
+    m->rho = calloc(s->nbands, sizeof(double));
+    m->Le = calloc(s->nbands, sizeof(double));
+    if (!m->name || !m->rho || !m->Le) {
+        free((void *)m->name);
+        free((void *)m->rho);
+        free((void *)m->Le);
+        return nomem(p);
+    }
+    *index = (uint32_t)s->nmaterials++;
+    return RP_OK;
+}
+
+static void material_finish(const rp_scene *s, rp_material *m)
+{
+    m->emitter = 0;
+    for (size_t b = 0; b < s->nbands; b++)
+        if (m->Le[b] > 0)
+            m->emitter = 1;
+}
+
+static rp_status st_material(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    rp_scene *s = p->s;
+    if (ntok < 2)
+        return fail(p, src->name, line, "'material' needs a name");
+    const char *name = tok[1];
+    if (find_material(s, name) != RP_NONE)
+        return fail(p, src->name, line, "duplicate material name '%.64s'", name);
+    if (ntok == 2)
+        return fail(p, src->name, line, "material '%.64s' has neither reflect nor emit", name);
+    double *rho = calloc(2 * s->nbands, sizeof *rho);
+    if (!rho)
+        return nomem(p);
+    double *Le = rho + s->nbands;
+    int seen_reflect = 0, seen_emit = 0;
+    rp_status st = RP_OK;
+    size_t i = 2;
+    while (!st && i < ntok) {
+        const char *kw = tok[i];
+        if (!strcmp(kw, "reflect") || !strcmp(kw, "emit")) {
+            int *seen = kw[0] == 'r' ? &seen_reflect : &seen_emit;
+            if (*seen) {
+                st = fail(p, src->name, line, "'%s' given twice", kw);
+                break;
+            }
+            *seen = 1;
+            i++;
+            st = material_values(p, src, line, tok, ntok, &i, kw, kw[0] == 'r' ? rho : Le);
+        } else {
+            st = fail(p, src->name, line,
+                      "unknown material property '%.64s' (radpt models diffuse 'reflect' and 'emit' only)", kw);
+        }
+    }
+    if (!st) {
+        uint32_t m;
+        st = add_material(p, name, &m);
+        if (!st) {
+            memcpy((void *)s->materials[m].rho, rho, s->nbands * sizeof *rho);
+            memcpy((void *)s->materials[m].Le, Le, s->nbands * sizeof *Le);
+            material_finish(s, &s->materials[m]);
+        }
+    }
+    free(rho);
+    return st;
+}
+
+static rp_status st_camera(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    if (p->s->has_camera)
+        return fail(p, src->name, line, "second 'camera' statement (the first is at %s:%d)", p->camera_file,
+                    p->camera_line);
+    rp_camera c;
+    memset(&c, 0, sizeof c);
+    int seen[5] = {0, 0, 0, 0, 0};
+    static const char *const keys[5] = {"eye", "look", "up", "fov", "size"};
+    static const size_t arity[5] = {3, 3, 3, 1, 2};
+    size_t i = 1;
+    while (i < ntok) {
+        int k = 0;
+        while (k < 5 && strcmp(tok[i], keys[k]))
+            k++;
+        if (k == 5)
+            return fail(p, src->name, line, "unknown camera keyword '%.64s' (eye, look, up, fov, size)", tok[i]);
+        if (seen[k])
+            return fail(p, src->name, line, "camera '%s' given twice", keys[k]);
+        seen[k] = 1;
+        size_t n = 0;
+        while (i + 1 + n < ntok && n < arity[k] && !is_word(tok[i + 1 + n]))
+            n++;
+        if (n != arity[k])
+            return fail(p, src->name, line, "camera '%s' takes %zu number%s", keys[k], arity[k],
+                        arity[k] > 1 ? "s" : "");
+        double v[3];
+        rp_status st = numbers(p, src, line, tok + i + 1, n, v);
+        if (st)
+            return st;
+        switch (k) {
+        case 0: c.eye = rp_v3(v[0], v[1], v[2]); break;
+        case 1: c.look = rp_v3(v[0], v[1], v[2]); break;
+        case 2: c.up = rp_v3(v[0], v[1], v[2]); break;
+        case 3:
+            if (!(v[0] > 0 && v[0] < 180))
+                return fail(p, src->name, line, "camera fov %g degrees outside (0, 180)", v[0]);
+            c.fov_deg = v[0];
+            break;
+        case 4:
+            for (int j = 0; j < 2; j++)
+                if (v[j] != floor(v[j]) || v[j] < 1 || v[j] > MAX_IMAGE_SIZE)
+                    return fail(p, src->name, line, "camera size %g is not a whole number of pixels in [1, %d]",
+                                v[j], MAX_IMAGE_SIZE);
+            c.width = (uint32_t)v[0];
+            c.height = (uint32_t)v[1];
+            break;
+        }
+        i += 1 + n;
+    }
+    for (int k = 0; k < 5; k++)
+        if (!seen[k])
+            return fail(p, src->name, line, "camera lacks '%s'", keys[k]);
+    rp_vec3 dir = rp_v3_sub(c.look, c.eye);
+    double ld = rp_v3_length(dir), lu = rp_v3_length(c.up);
+    if (!(ld > 0))
+        return fail(p, src->name, line, "camera eye and look are the same point");
+    if (!(lu > 0) || rp_v3_length(rp_v3_cross(dir, c.up)) <= 1e-9 * ld * lu)
+        return fail(p, src->name, line, "camera up is zero or parallel to the view direction");
+    p->s->camera = c;
+    p->s->has_camera = 1;
+    p->camera_file = src->name;
+    p->camera_line = line;
+    return RP_OK;
+}
+
+/* ------------------------------------------------------------- geometry */
+
+static rp_status add_vertex(parser *p, rp_vec3 v, uint32_t *index)
+{
+    rp_scene *s = p->s;
+    if (s->nvertices >= UINT32_MAX - 1)
+        return rp_error_set(p->err, RP_ERR_INPUT, "too many vertices");
+    if (!grow((void **)&s->vertices, &s->cap_vertices, s->nvertices + 1, sizeof *s->vertices))
+        return nomem(p);
+    s->vertices[s->nvertices] = v;
+    *index = (uint32_t)s->nvertices++;
+    return RP_OK;
+}
+
+/* Checks a face and computes its normal and area; returns NULL when it is
+ * acceptable, otherwise what is wrong (in buf). */
+static const char *face_check(const rp_vec3 *v, uint32_t n, rp_vec3 *normal, double *area, char *buf, size_t len)
+{
+    if (n == 3) {
+        rp_vec3 e1 = rp_v3_sub(v[1], v[0]), e2 = rp_v3_sub(v[2], v[0]), e3 = rp_v3_sub(v[2], v[1]);
+        double l = fmax(rp_v3_length(e1), fmax(rp_v3_length(e2), rp_v3_length(e3)));
+        rp_vec3 c = rp_v3_cross(e1, e2);
+        double lc = rp_v3_length(c);
+        if (!(lc > RELATIVE_COLLINEAR * l * l))
+            return "degenerate triangle (zero area: coincident or collinear vertices)";
+        *normal = rp_v3_scale(c, 1.0 / lc);
+        *area = 0.5 * lc;
+        return NULL;
+    }
+    rp_vec3 d1 = rp_v3_sub(v[2], v[0]), d2 = rp_v3_sub(v[3], v[1]);
+    double l = fmax(rp_v3_length(d1), rp_v3_length(d2));
+    rp_vec3 a = rp_v3_cross(d1, d2);
+    double la = rp_v3_length(a);
+    if (!(la > RELATIVE_COLLINEAR * l * l))
+        return "degenerate quad (zero area, or self-intersecting with parallel diagonals)";
+    rp_vec3 nrm = rp_v3_scale(a, 1.0 / la);
+    double twist = fabs(rp_v3_dot(rp_v3_sub(v[1], v[0]), nrm));
+    if (twist > RELATIVE_TWIST * l) {
+        snprintf(buf, len,
+                 "quad is not planar: its diagonals are %g apart along the normal (tolerance %g, 1e-6 of the "
+                 "diagonal); split it into two triangles",
+                 twist, RELATIVE_TWIST * l);
+        return buf;
+    }
+    for (int i = 0; i < 4; i++) {
+        rp_vec3 ea = rp_v3_sub(v[(i + 1) % 4], v[i]), eb = rp_v3_sub(v[(i + 2) % 4], v[(i + 1) % 4]);
+        double turn = rp_v3_dot(rp_v3_cross(ea, eb), nrm);
+        if (!(turn > RELATIVE_COLLINEAR * rp_v3_length(ea) * rp_v3_length(eb))) {
+            snprintf(buf, len, "quad is not convex or crosses itself (at vertex %d)", (i + 1) % 4);
+            return buf;
+        }
+    }
+    *normal = rp_v3_normalize(rp_v3_cross(rp_v3_sub(v[1], v[0]), rp_v3_sub(v[3], v[0])));
+    *area = 0.5 * la;
+    return NULL;
+}
+
+/* Appends a face over existing vertices idx[0..n) to the last surface. */
+static rp_status add_face(parser *p, const source *src, int line, const uint32_t *idx, uint32_t n, const char *what)
+{
+    rp_scene *s = p->s;
+    rp_vec3 v[4];
+    for (uint32_t i = 0; i < n; i++)
+        v[i] = s->vertices[idx[i]];
+    char buf[256];
+    rp_face f;
+    memset(&f, 0, sizeof f);
+    const char *bad = face_check(v, n, &f.normal, &f.area, buf, sizeof buf);
+    if (bad)
+        return fail(p, src->name, line, "%s%s", what ? what : "", bad);
+    if (s->nfaces >= UINT32_MAX - 1)
+        return fail(p, src->name, line, "too many faces");
+    if (!grow((void **)&s->faces, &s->cap_faces, s->nfaces + 1, sizeof *s->faces))
+        return nomem(p);
+    for (uint32_t i = 0; i < 4; i++)
+        f.v[i] = i < n ? idx[i] : RP_NONE;
+    f.nverts = n;
+    f.surface = (uint32_t)(s->nsurfaces - 1);
+    s->faces[s->nfaces++] = f;
+    rp_surface *surf = &s->surfaces[s->nsurfaces - 1];
+    surf->nfaces++;
+    surf->area += f.area;
+    return RP_OK;
+}
+
+/* Opens a surface; its faces follow.  On failure nothing is added. */
+static rp_status begin_surface(parser *p, const source *src, int line, const char *name, const char *mat,
+                               rp_surface_kind kind)
+{
+    rp_scene *s = p->s;
+    uint32_t m = find_material(s, mat);
+    if (m == RP_NONE)
+        return fail(p, src->name, line, "unknown material '%.64s'", mat);
+    for (size_t i = 0; i < s->nsurfaces; i++)
+        if (!strcmp(s->surfaces[i].name, name))
+            return fail(p, src->name, line, "duplicate surface name '%.64s' (first at %s:%d)", name,
+                        s->surfaces[i].file, s->surfaces[i].line);
+    if (s->nsurfaces >= UINT32_MAX - 1)
+        return fail(p, src->name, line, "too many surfaces");
+    if (!grow((void **)&s->surfaces, &s->cap_surfaces, s->nsurfaces + 1, sizeof *s->surfaces))
+        return nomem(p);
+    rp_surface *surf = &s->surfaces[s->nsurfaces];
+    memset(surf, 0, sizeof *surf);
+    surf->name = dup_string(name);
+    if (!surf->name)
+        return nomem(p);
+    surf->kind = kind;
+    surf->material = m;
+    surf->first_face = (uint32_t)s->nfaces;
+    surf->file = src->name;
+    surf->line = line;
+    s->nsurfaces++;
+    return RP_OK;
+}
+
+/* Removes a surface whose faces could not all be added (the caller has
+ * already set the error), with its faces and vertices. */
+static void drop_last_surface(rp_scene *s, size_t nvertices_before)
+{
+    rp_surface *surf = &s->surfaces[s->nsurfaces - 1];
+    s->nfaces = surf->first_face;
+    free((void *)surf->name);
+    s->nsurfaces--;
+    s->nvertices = nvertices_before;
+}
+
+static rp_status st_polygon(parser *p, const source *src, int line, char **tok, size_t ntok, uint32_t n)
+{
+    const char *kw = n == 3 ? "triangle" : "quad";
+    if (ntok != 3 + 3 * (size_t)n)
+        return fail(p, src->name, line, "'%s' takes a name, a material and %u numbers (%u vertices), not %zu tokens",
+                    kw, 3 * n, n, ntok - 1);
+    double c[12];
+    rp_status st = numbers(p, src, line, tok + 3, 3 * (size_t)n, c);
+    if (st)
+        return st;
+    rp_scene *s = p->s;
+    size_t nv = s->nvertices;
+    st = begin_surface(p, src, line, tok[1], tok[2], n == 3 ? RP_SURFACE_TRIANGLE : RP_SURFACE_QUAD);
+    if (st)
+        return st;
+    uint32_t idx[4];
+    for (uint32_t i = 0; !st && i < n; i++)
+        st = add_vertex(p, rp_v3(c[3 * i], c[3 * i + 1], c[3 * i + 2]), &idx[i]);
+    if (!st)
+        st = add_face(p, src, line, idx, n, NULL);
+    if (st)
+        drop_last_surface(s, nv);
+    return st;
+}
+
+static rp_status st_box(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    if (ntok != 10)
+        return fail(p, src->name, line,
+                    "'box' takes a name, a material, xmin ymin zmin xmax ymax zmax and inward|outward");
+    double c[6];
+    rp_status st = numbers(p, src, line, tok + 3, 6, c);
+    if (st)
+        return st;
+    int inward;
+    if (!strcmp(tok[9], "inward"))
+        inward = 1;
+    else if (!strcmp(tok[9], "outward"))
+        inward = 0;
+    else
+        return fail(p, src->name, line, "box orientation '%.64s' is neither inward nor outward", tok[9]);
+    for (int a = 0; a < 3; a++)
+        if (!(c[a] < c[a + 3]))
+            return fail(p, src->name, line, "box %c range [%g, %g] is empty (min must be below max)", "xyz"[a], c[a],
+                        c[a + 3]);
+    rp_scene *s = p->s;
+    size_t nv = s->nvertices;
+    st = begin_surface(p, src, line, tok[1], tok[2], RP_SURFACE_BOX);
+    if (st)
+        return st;
+    /* Corner (i, j, k) is index i + 2 j + 4 k; each face counter-clockwise
+     * seen from inside the box (normal into the box). */
+    static const int face[6][4] = {
+        {0, 4, 5, 1}, /* y = ymin, normal +y */
+        {2, 3, 7, 6}, /* y = ymax, normal -y */
+        {0, 2, 6, 4}, /* x = xmin, normal +x */
+        {1, 5, 7, 3}, /* x = xmax, normal -x */
+        {0, 1, 3, 2}, /* z = zmin, normal +z */
+        {4, 6, 7, 5}, /* z = zmax, normal -z */
+    };
+    uint32_t corner[8];
+    for (int k = 0; !st && k < 8; k++)
+        st = add_vertex(p, rp_v3(c[(k & 1) ? 3 : 0], c[(k & 2) ? 4 : 1], c[(k & 4) ? 5 : 2]), &corner[k]);
+    for (int f = 0; !st && f < 6; f++) {
+        uint32_t idx[4];
+        for (int i = 0; i < 4; i++)
+            idx[i] = corner[face[f][inward ? i : (4 - i) % 4]];
+        st = add_face(p, src, line, idx, 4, "box face: ");
+    }
+    if (st)
+        drop_last_surface(s, nv);
+    return st;
+}
+
+static rp_status st_mesh(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    if (ntok < 4)
+        return fail(p, src->name, line, "'mesh' takes a name, a material, a path and [scale S] [translate X Y Z]");
+    double scale = 1, t[3] = {0, 0, 0};
+    int seen_scale = 0, seen_translate = 0;
+    rp_status st;
+    for (size_t i = 4; i < ntok;) {
+        if (!strcmp(tok[i], "scale")) {
+            if (seen_scale)
+                return fail(p, src->name, line, "mesh 'scale' given twice");
+            if (i + 1 >= ntok)
+                return fail(p, src->name, line, "mesh 'scale' takes one number");
+            if ((st = number(p, src, line, tok[i + 1], &scale)))
+                return st;
+            if (!(scale > 0))
+                return fail(p, src->name, line, "mesh scale %g is not positive", scale);
+            seen_scale = 1;
+            i += 2;
+        } else if (!strcmp(tok[i], "translate")) {
+            if (seen_translate)
+                return fail(p, src->name, line, "mesh 'translate' given twice");
+            if (i + 3 >= ntok)
+                return fail(p, src->name, line, "mesh 'translate' takes three numbers");
+            if ((st = numbers(p, src, line, tok + i + 1, 3, t)))
+                return st;
+            seen_translate = 1;
+            i += 4;
+        } else {
+            return fail(p, src->name, line, "unknown mesh option '%.64s' (scale, translate)", tok[i]);
+        }
+    }
+    rp_scene *s = p->s;
+    if (find_material(s, tok[2]) == RP_NONE)
+        return fail(p, src->name, line, "unknown material '%.64s'", tok[2]);
+    char *path = join_path(src->dir, tok[3]);
+    if (!path)
+        return nomem(p);
+    FILE *probe = fopen(path, "rb");
+    if (!probe) {
+        st = fail(p, src->name, line, "cannot open mesh '%.200s': %s", path, strerror(errno));
+        free(path);
+        return st;
+    }
+    fclose(probe);
+    rp_tri_mesh m;
+    memset(&m, 0, sizeof m);
+    char msg[512] = "";
+    if (rp_cgal_read_mesh(path, 0, &m, msg, sizeof msg) != 0) {
+        st = fail(p, src->name, line, "mesh: %s", msg[0] ? msg : path);
+        rp_tri_mesh_free(&m);
+        free(path);
+        return st;
+    }
+    if (m.degenerate_faces > 0)
+        st = fail(p, src->name, line, "mesh '%.200s' has %zu degenerate (zero-area) faces", path, m.degenerate_faces);
+    else if (m.orientation_conflicts > 0)
+        st = fail(p, src->name, line,
+                  "mesh '%.200s' is inconsistently oriented (%zu edges used twice in the same direction)", path,
+                  m.orientation_conflicts);
+    else if (m.ntriangles == 0)
+        st = fail(p, src->name, line, "mesh '%.200s' has no faces", path);
+    size_t nv = s->nvertices;
+    if (!st)
+        st = begin_surface(p, src, line, tok[1], tok[2], RP_SURFACE_MESH);
+    if (!st) {
+        uint32_t base = (uint32_t)s->nvertices;
+        if (m.nvertices >= UINT32_MAX - s->nvertices)
+            st = fail(p, src->name, line, "mesh '%.200s' has too many vertices", path);
+        for (size_t i = 0; !st && i < m.nvertices; i++) {
+            uint32_t idx;
+            if (!isfinite(m.xyz[3 * i]) || !isfinite(m.xyz[3 * i + 1]) || !isfinite(m.xyz[3 * i + 2])) {
+                st = fail(p, src->name, line, "mesh '%.200s': vertex %zu is not finite", path, i);
+                break;
+            }
+            st = add_vertex(p, rp_v3(scale * m.xyz[3 * i] + t[0], scale * m.xyz[3 * i + 1] + t[1],
+                                     scale * m.xyz[3 * i + 2] + t[2]),
+                            &idx);
+        }
+        for (size_t f = 0; !st && f < m.ntriangles; f++) {
+            uint32_t idx[3];
+            for (int k = 0; k < 3; k++) {
+                if (m.tri[3 * f + k] >= m.nvertices) {
+                    st = fail(p, src->name, line, "mesh '%.200s': face %zu has a bad vertex index", path, f);
+                    break;
+                }
+                idx[k] = base + m.tri[3 * f + k];
+            }
+            if (!st) {
+                char what[64];
+                snprintf(what, sizeof what, "mesh face %zu: ", f);
+                st = add_face(p, src, line, idx, 3, what);
+            }
+        }
+        if (st)
+            drop_last_surface(s, nv);
+    }
+    rp_tri_mesh_free(&m);
+    free(path);
+    return st;
+}
+
+static rp_status parse_source(parser *p, char *text, const source *src, int *nlines);
+
+static rp_status st_include(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    if (ntok != 2)
+        return fail(p, src->name, line, "'include' takes one path");
+    if (src->depth + 1 > MAX_INCLUDE_DEPTH)
+        return fail(p, src->name, line, "includes nested deeper than %d", MAX_INCLUDE_DEPTH);
+    char *path = join_path(src->dir, tok[1]);
+    if (!path)
+        return nomem(p);
+    rp_status st = RP_OK;
+    char *real = realpath(path, NULL);
+    char *text = NULL;
+    if (!real) {
+        st = fail(p, src->name, line, "cannot open include '%.200s': %s", path, strerror(errno));
+        goto done;
+    }
+    for (size_t i = 0; i < p->nstack; i++)
+        if (!strcmp(p->stack[i], real)) {
+            st = fail(p, src->name, line, "include cycle: '%.200s' is already being read", path);
+            goto done;
+        }
+    text = read_text(path);
+    if (!text) {
+        st = fail(p, src->name, line, "cannot read include '%.200s': %s", path, strerror(errno));
+        goto done;
+    }
+    source inc;
+    inc.name = keep_file_name(p, path);
+    int ok;
+    inc.dir = dir_name(path, &ok);
+    inc.depth = src->depth + 1;
+    if (!inc.name || !ok || !grow((void **)&p->stack, &p->cap_stack, p->nstack + 1, sizeof *p->stack)) {
+        free(inc.dir);
+        st = nomem(p);
+        goto done;
+    }
+    p->stack[p->nstack++] = real;
+    real = NULL;
+    int nlines;
+    st = parse_source(p, text, &inc, &nlines);
+    free(p->stack[--p->nstack]);
+    free(inc.dir);
+done:
+    free(text);
+    free(real);
+    free(path);
+    return st;
+}
+
+static rp_status statement(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    const char *kw = tok[0];
+    if (!strcmp(kw, "bands"))
+        return st_bands(p, src, line, tok, ntok);
+    if (!strcmp(kw, "camera"))
+        return st_camera(p, src, line, tok, ntok);
+    if (!strcmp(kw, "material"))
+        return st_material(p, src, line, tok, ntok);
+    if (!strcmp(kw, "quad"))
+        return st_polygon(p, src, line, tok, ntok, 4);
+    if (!strcmp(kw, "triangle"))
+        return st_polygon(p, src, line, tok, ntok, 3);
+    if (!strcmp(kw, "box"))
+        return st_box(p, src, line, tok, ntok);
+    if (!strcmp(kw, "mesh"))
+        return st_mesh(p, src, line, tok, ntok);
+    if (!strcmp(kw, "include"))
+        return st_include(p, src, line, tok, ntok);
+    return fail(p, src->name, line, "unknown statement '%.64s'", kw);
+}
+
+/* Parses text (modified in place) line by line. */
+static rp_status parse_source(parser *p, char *text, const source *src, int *nlines)
+{
+    char **tok = NULL;
+    size_t cap = 0;
+    int line = 0;
+    rp_status st = RP_OK;
+    char *cur = text;
+    while (!st && cur && *cur) {
+        line++;
+        char *nl = strchr(cur, '\n');
+        char *next = nl ? nl + 1 : NULL;
+        if (nl)
+            *nl = '\0';
+        char *hash = strchr(cur, '#');
+        if (hash)
+            *hash = '\0';
+        size_t ntok = 0;
+        char *q = cur;
+        for (;;) {
+            while (*q && isspace((unsigned char)*q))
+                q++;
+            if (!*q)
+                break;
+            if (!grow((void **)&tok, &cap, ntok + 1, sizeof *tok)) {
+                st = nomem(p);
+                break;
+            }
+            tok[ntok++] = q;
+            while (*q && !isspace((unsigned char)*q))
+                q++;
+            if (*q)
+                *q++ = '\0';
+        }
+        if (!st && ntok > 0)
+            st = statement(p, src, line, tok, ntok);
+        cur = next;
+    }
+    free(tok);
+    *nlines = line;
+    return st;
+}
+
+/* ---------------------------------------------------------- finishing */
+
+static void compute_bounds(rp_scene *s)
+{
+    s->lo = rp_v3(0, 0, 0);
+    s->hi = rp_v3(0, 0, 0);
+    for (size_t i = 0; i < s->nvertices; i++) {
+        rp_vec3 v = s->vertices[i];
+        if (i == 0) {
+            s->lo = s->hi = v;
+            continue;
+        }
+        s->lo = rp_v3(fmin(s->lo.x, v.x), fmin(s->lo.y, v.y), fmin(s->lo.z, v.z));
+        s->hi = rp_v3(fmax(s->hi.x, v.x), fmax(s->hi.y, v.y), fmax(s->hi.z, v.z));
+    }
+    s->total_area = 0;
+    for (size_t i = 0; i < s->nsurfaces; i++)
+        s->total_area += s->surfaces[i].area;
+}
+
+/* Checks that need the whole scene: its scale and its emitters.  A scene
+ * without an emitter is blamed on name:line (its last line; 0: no line). */
+static rp_status finish(parser *p, const char *name, int line)
+{
+    rp_scene *s = p->s;
+    compute_bounds(s);
+    double diag = rp_scene_diagonal(s);
+    double tiny = RELATIVE_WELD * diag * RELATIVE_WELD * diag;
+    for (size_t f = 0; f < s->nfaces; f++)
+        if (!(s->faces[f].area > tiny)) {
+            const rp_surface *surf = &s->surfaces[s->faces[f].surface];
+            return fail(p, surf->file, surf->line,
+                        "degenerate face in '%s' (area %g, below (1e-7 x scene diagonal %g)^2)", surf->name,
+                        s->faces[f].area, diag);
+        }
+    int emitting = 0;
+    for (size_t i = 0; i < s->nsurfaces; i++)
+        if (s->materials[s->surfaces[i].material].emitter)
+            emitting = 1;
+    if (!emitting)
+        return fail(p, name, line, "the scene has no emitter (no surface's material emits)");
+    return RP_OK;
+}
+
+static void parser_free(parser *p)
+{
+    for (size_t i = 0; i < p->nstack; i++)
+        free(p->stack[i]);
+    free(p->stack);
+}
+
+/* Parses text named name; real is the canonical path of the file when the
+ * text came from one (for include cycles), else NULL. */
+static rp_status parse_top(const char *text, const char *name, const char *dir, const char *real, rp_scene **out,
+                           rp_error *err)
+{
+    *out = NULL;
+    parser p;
+    memset(&p, 0, sizeof p);
+    p.err = err;
+    p.s = scene_new();
+    char *copy = dup_string(text);
+    char *dcopy = dir ? dup_string(dir) : NULL;
+    source src = {NULL, dcopy, 0};
+    rp_status st = RP_OK;
+    if (!p.s || !copy || (dir && !dcopy) || !(src.name = keep_file_name(&p, name)))
+        st = nomem(&p);
+    if (!st && real) {
+        char *r = dup_string(real);
+        if (!r || !grow((void **)&p.stack, &p.cap_stack, 1, sizeof *p.stack)) {
+            free(r);
+            st = nomem(&p);
+        } else {
+            p.stack[p.nstack++] = r;
+        }
+    }
+    int nlines = 0;
+    if (!st)
+        st = parse_source(&p, copy, &src, &nlines);
+    if (!st)
+        st = finish(&p, src.name, nlines > 0 ? nlines : 1);
+    free(copy);
+    free(dcopy);
+    parser_free(&p);
+    if (st) {
+        rp_scene_destroy(p.s);
+        return st;
+    }
+    rp_error_clear(err);
+    *out = p.s;
+    return RP_OK;
+}
+
+rp_status rp_scene_parse(const char *text, const char *name, const char *dir, rp_scene **out, rp_error *err)
+{
+    if (!text || !out)
+        return rp_error_set(err, RP_ERR_INPUT, "rp_scene_parse: no text");
+    return parse_top(text, name ? name : "<scene>", dir, NULL, out, err);
+}
+
+/* ---------------------------------------------------------------- OBJ */
+
+typedef struct obj_key {
+    uint32_t group, material, tri;
+} obj_key;
+
+static int obj_key_cmp(const void *a, const void *b)
+{
+    const obj_key *x = a, *y = b;
+    if (x->group != y->group)
+        return x->group < y->group ? -1 : 1;
+    if (x->material != y->material)
+        return x->material < y->material ? -1 : 1;
+    return x->tri < y->tri ? -1 : x->tri > y->tri;
+}
+
+/* Each (group, material) pair becomes a surface, named after the group, or
+ * "group.material" when the group mixes materials. */
+static rp_status obj_build(parser *p, const char *path, const rp_tri_mesh *m)
+{
+    rp_scene *s = p->s;
+    const source src = {path, NULL, 0};
+    s->band_kind = RP_BANDS_RGB;
+    s->nbands = 3;
+    if (m->degenerate_faces > 0)
+        return fail(p, path, 0, "%zu degenerate (zero-area) faces", m->degenerate_faces);
+    if (m->orientation_conflicts > 0)
+        return fail(p, path, 0, "inconsistently oriented (%zu edges used twice in the same direction)",
+                    m->orientation_conflicts);
+    if (m->ntriangles == 0)
+        return fail(p, path, 0, "no faces");
+    for (size_t i = 0; i < m->nmaterials; i++) {
+        const char *mname = m->material_names && m->material_names[i] ? m->material_names[i] : "";
+        if (find_material(s, mname) != RP_NONE)
+            return fail(p, path, 0, "duplicate material name '%.64s'", mname);
+        for (int c = 0; c < 3; c++) {
+            double kd = m->material_kd[3 * i + c], ke = m->material_ke[3 * i + c];
+            if (!isfinite(kd) || kd < 0 || kd >= 1)
+                return fail(p, path, 0, "material '%.64s': Kd %g outside [0, 1)", mname, kd);
+            if (!isfinite(ke) || ke < 0)
+                return fail(p, path, 0, "material '%.64s': Ke %g is negative or not finite", mname, ke);
+        }
+        uint32_t idx;
+        rp_status st = add_material(p, mname, &idx);
+        if (st)
+            return st;
+        memcpy((void *)s->materials[idx].rho, m->material_kd + 3 * i, 3 * sizeof(double));
+        memcpy((void *)s->materials[idx].Le, m->material_ke + 3 * i, 3 * sizeof(double));
+        material_finish(s, &s->materials[idx]);
+    }
+    for (size_t i = 0; i < m->nvertices; i++) {
+        uint32_t idx;
+        rp_vec3 v = rp_v3(m->xyz[3 * i], m->xyz[3 * i + 1], m->xyz[3 * i + 2]);
+        if (!rp_v3_isfinite(v))
+            return fail(p, path, 0, "vertex %zu is not finite", i);
+        rp_status st = add_vertex(p, v, &idx);
+        if (st)
+            return st;
+    }
+    obj_key *keys = malloc(m->ntriangles * sizeof *keys);
+    if (!keys)
+        return nomem(p);
+    rp_status st = RP_OK;
+    for (size_t t = 0; !st && t < m->ntriangles; t++) {
+        keys[t].group = m->tri_group ? m->tri_group[t] : 0;
+        keys[t].material = m->tri_material ? m->tri_material[t] : UINT32_MAX;
+        keys[t].tri = (uint32_t)t;
+        if (keys[t].material == UINT32_MAX || keys[t].material >= m->nmaterials)
+            st = fail(p, path, 0, "face %zu has no material (radpt needs Kd/Ke for every face)", t);
+        else if (m->tri_group && keys[t].group >= m->ngroups)
+            st = fail(p, path, 0, "face %zu has a bad group index", t);
+        for (int k = 0; !st && k < 3; k++)
+            if (m->tri[3 * t + k] >= m->nvertices)
+                st = fail(p, path, 0, "face %zu has a bad vertex index", t);
+    }
+    if (!st)
+        qsort(keys, m->ntriangles, sizeof *keys, obj_key_cmp);
+    size_t t = 0;
+    while (!st && t < m->ntriangles) {
+        uint32_t g = keys[t].group, mat = keys[t].material;
+        /* Does group g use more than one material? Its keys are contiguous. */
+        size_t g0 = t, g1 = t;
+        while (g0 > 0 && keys[g0 - 1].group == g)
+            g0--;
+        while (g1 < m->ntriangles && keys[g1].group == g)
+            g1++;
+        int mixed = keys[g0].material != keys[g1 - 1].material;
+        const char *gname = m->group_names && g < m->ngroups && m->group_names[g] && m->group_names[g][0]
+                                ? m->group_names[g]
+                                : "default";
+        char name[512];
+        if (mixed)
+            snprintf(name, sizeof name, "%s.%s", gname, s->materials[mat].name);
+        else
+            snprintf(name, sizeof name, "%s", gname);
+        st = begin_surface(p, &src, 0, name, s->materials[mat].name, RP_SURFACE_MESH);
+        for (; !st && t < m->ntriangles && keys[t].group == g && keys[t].material == mat; t++) {
+            uint32_t idx[3] = {m->tri[3 * keys[t].tri], m->tri[3 * keys[t].tri + 1], m->tri[3 * keys[t].tri + 2]};
+            char what[96];
+            snprintf(what, sizeof what, "surface '%.40s', face %u: ", name, keys[t].tri);
+            st = add_face(p, &src, 0, idx, 3, what);
+        }
+    }
+    free(keys);
+    return st;
+}
+
+static int ends_with_obj(const char *path)
+{
+    size_t n = strlen(path);
+    return n >= 4 && path[n - 4] == '.' && tolower((unsigned char)path[n - 3]) == 'o' &&
+           tolower((unsigned char)path[n - 2]) == 'b' && tolower((unsigned char)path[n - 1]) == 'j';
+}
+
+static rp_status load_obj(const char *path, rp_scene **out, rp_error *err)
+{
+    parser p;
+    memset(&p, 0, sizeof p);
+    p.err = err;
+    p.s = scene_new();
+    if (!p.s)
+        return nomem(&p);
+    const char *name = keep_file_name(&p, path);
+    if (!name) {
+        rp_scene_destroy(p.s);
+        return nomem(&p);
+    }
+    rp_tri_mesh m;
+    memset(&m, 0, sizeof m);
+    char msg[512] = "";
+    rp_status st = RP_OK;
+    if (rp_obj_read_scene(path, &m, msg, sizeof msg) != 0)
+        st = rp_error_set(err, RP_ERR_INPUT, "%s", msg[0] ? msg : "cannot read the OBJ scene");
+    if (!st)
+        st = obj_build(&p, name, &m);
+    if (!st)
+        st = finish(&p, name, 0);
+    rp_tri_mesh_free(&m);
+    if (st) {
+        rp_scene_destroy(p.s);
+        return st;
+    }
+    rp_error_clear(err);
+    *out = p.s;
+    return RP_OK;
+}
+
+rp_status rp_scene_load(const char *path, rp_scene **out, rp_error *err)
+{
+    if (!out)
+        return rp_error_set(err, RP_ERR_INPUT, "rp_scene_load: no output");
+    *out = NULL;
+    if (!path)
+        return rp_error_set(err, RP_ERR_INPUT, "rp_scene_load: no path");
+    char *real = realpath(path, NULL);
+    if (!real)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: cannot open: %s", path, strerror(errno));
+    rp_status st;
+    if (ends_with_obj(path)) {
+        free(real);
+        return load_obj(path, out, err);
+    }
+    char *text = read_text(path);
+    if (!text) {
+        st = rp_error_set(err, RP_ERR_INPUT, "%s: cannot read: %s", path, strerror(errno));
+        free(real);
+        return st;
+    }
+    int ok;
+    char *dir = dir_name(path, &ok);
+    if (!ok)
+        st = rp_error_set(err, RP_ERR_NOMEM, "out of memory while reading the scene");
+    else
+        st = parse_top(text, path, dir, real, out, err);
+    free(dir);
+    free(text);
+    free(real);
+    return st;
+}
+
+/* ------------------------------------------------------------ accessors */
+
+rp_band_kind rp_scene_band_kind(const rp_scene *s) { return s->band_kind; }
+size_t rp_scene_nbands(const rp_scene *s) { return s->nbands; }
+const double *rp_scene_wavelengths(const rp_scene *s) { return s->wavelengths; }
+size_t rp_scene_nmaterials(const rp_scene *s) { return s->nmaterials; }
+const rp_material *rp_scene_materials(const rp_scene *s) { return s->materials; }
+size_t rp_scene_nsurfaces(const rp_scene *s) { return s->nsurfaces; }
+const rp_surface *rp_scene_surfaces(const rp_scene *s) { return s->surfaces; }
+size_t rp_scene_nfaces(const rp_scene *s) { return s->nfaces; }
+const rp_face *rp_scene_faces(const rp_scene *s) { return s->faces; }
+size_t rp_scene_nvertices(const rp_scene *s) { return s->nvertices; }
+const rp_vec3 *rp_scene_vertices(const rp_scene *s) { return s->vertices; }
+
+const rp_material *rp_scene_face_material(const rp_scene *s, uint32_t face)
+{
+    return &s->materials[s->surfaces[s->faces[face].surface].material];
+}
+
+const rp_camera *rp_scene_camera(const rp_scene *s) { return s->has_camera ? &s->camera : NULL; }
+
+uint32_t rp_scene_find_surface(const rp_scene *s, const char *name)
+{
+    for (size_t i = 0; i < s->nsurfaces; i++)
+        if (!strcmp(s->surfaces[i].name, name))
+            return (uint32_t)i;
+    return RP_NONE;
+}
+
+void rp_scene_surface_power(const rp_scene *s, uint32_t surface, double *power)
+{
+    const rp_surface *surf = &s->surfaces[surface];
+    const rp_material *m = &s->materials[surf->material];
+    /* Lambertian emitter: exitance pi Le over the area. */
+    for (size_t b = 0; b < s->nbands; b++)
+        power[b] = RP_PI * m->Le[b] * surf->area;
+}
+
+double rp_scene_total_area(const rp_scene *s) { return s->total_area; }
+
+void rp_scene_bounds(const rp_scene *s, rp_vec3 *lo, rp_vec3 *hi)
+{
+    if (lo)
+        *lo = s->lo;
+    if (hi)
+        *hi = s->hi;
+}
+
+double rp_scene_diagonal(const rp_scene *s) { return rp_v3_length(rp_v3_sub(s->hi, s->lo)); }
+
+rp_vec3 rp_scene_face_point(const rp_scene *s, uint32_t face, double u, double v)
+{
+    const rp_face *f = &s->faces[face];
+    const rp_vec3 *V = s->vertices;
+    rp_vec3 v0 = V[f->v[0]], v1 = V[f->v[1]], v2 = V[f->v[2]];
+    if (f->nverts == 3)
+        return rp_v3_madd(rp_v3_madd(v0, rp_v3_sub(v1, v0), u), rp_v3_sub(v2, v0), v);
+    rp_vec3 v3 = V[f->v[3]];
+    rp_vec3 p = rp_v3_scale(v0, (1 - u) * (1 - v));
+    p = rp_v3_madd(p, v1, u * (1 - v));
+    p = rp_v3_madd(p, v2, u * v);
+    return rp_v3_madd(p, v3, (1 - u) * v);
+}
+
+/* --------------------------------------------------------------- hash */
+
+typedef struct fnv {
+    uint64_t h;
+} fnv;
+
+/* FNV-1a, 64 bit (Fowler, Noll, Vo). */
+static void fnv_bytes(fnv *f, const void *data, size_t n)
+{
+    const unsigned char *b = data;
+    for (size_t i = 0; i < n; i++) {
+        f->h ^= b[i];
+        f->h *= UINT64_C(0x100000001b3);
+    }
+}
+
+/* Integers and doubles are hashed as little-endian bytes so the hash does
+ * not depend on the host. */
+static void fnv_u64(fnv *f, uint64_t x)
+{
+    unsigned char b[8];
+    for (int i = 0; i < 8; i++)
+        b[i] = (unsigned char)(x >> (8 * i));
+    fnv_bytes(f, b, 8);
+}
+
+static void fnv_double(fnv *f, double x)
+{
+    uint64_t u;
+    if (x == 0)
+        x = 0; /* -0 and +0 hash alike */
+    memcpy(&u, &x, sizeof u);
+    fnv_u64(f, u);
+}
+
+static void fnv_string(fnv *f, const char *s) { fnv_bytes(f, s, strlen(s) + 1); }
+
+static void fnv_vec(fnv *f, rp_vec3 v)
+{
+    fnv_double(f, v.x);
+    fnv_double(f, v.y);
+    fnv_double(f, v.z);
+}
+
+void rp_scene_hash(const rp_scene *s, char out[17])
+{
+    fnv f = {UINT64_C(0xcbf29ce484222325)};
+    fnv_string(&f, "radpt scene 1");
+    fnv_u64(&f, (uint64_t)s->band_kind);
+    fnv_u64(&f, s->nbands);
+    for (size_t b = 0; s->wavelengths && b < s->nbands; b++)
+        fnv_double(&f, s->wavelengths[b]);
+    fnv_u64(&f, s->nmaterials);
+    for (size_t i = 0; i < s->nmaterials; i++) {
+        fnv_string(&f, s->materials[i].name);
+        for (size_t b = 0; b < s->nbands; b++) {
+            fnv_double(&f, s->materials[i].rho[b]);
+            fnv_double(&f, s->materials[i].Le[b]);
+        }
+    }
+    fnv_u64(&f, s->nsurfaces);
+    for (size_t i = 0; i < s->nsurfaces; i++) {
+        const rp_surface *surf = &s->surfaces[i];
+        fnv_string(&f, surf->name);
+        fnv_u64(&f, (uint64_t)surf->kind);
+        fnv_u64(&f, surf->material);
+        fnv_u64(&f, surf->first_face);
+        fnv_u64(&f, surf->nfaces);
+    }
+    fnv_u64(&f, s->nfaces);
+    for (size_t i = 0; i < s->nfaces; i++) {
+        fnv_u64(&f, s->faces[i].nverts);
+        for (uint32_t k = 0; k < s->faces[i].nverts; k++)
+            fnv_u64(&f, s->faces[i].v[k]);
+    }
+    fnv_u64(&f, s->nvertices);
+    for (size_t i = 0; i < s->nvertices; i++)
+        fnv_vec(&f, s->vertices[i]);
+    fnv_u64(&f, (uint64_t)s->has_camera);
+    if (s->has_camera) {
+        fnv_vec(&f, s->camera.eye);
+        fnv_vec(&f, s->camera.look);
+        fnv_vec(&f, s->camera.up);
+        fnv_double(&f, s->camera.fov_deg);
+        fnv_u64(&f, s->camera.width);
+        fnv_u64(&f, s->camera.height);
+    }
+    snprintf(out, 17, "%016llx", (unsigned long long)f.h);
+}
+
+/* ----------------------------------------------------------- closedness */
+
+int rp_scene_is_closed(const rp_scene *s)
+{
+    if (s->nfaces == 0)
+        return 0;
+    size_t ntri = 0;
+    for (size_t i = 0; i < s->nfaces; i++)
+        ntri += s->faces[i].nverts == 4 ? 2 : 1;
+    double *xyz = malloc(3 * s->nvertices * sizeof *xyz);
+    uint32_t *tri = malloc(3 * ntri * sizeof *tri);
+    if (!xyz || !tri) {
+        free(xyz);
+        free(tri);
+        return -1;
+    }
+    for (size_t i = 0; i < s->nvertices; i++) {
+        xyz[3 * i] = s->vertices[i].x;
+        xyz[3 * i + 1] = s->vertices[i].y;
+        xyz[3 * i + 2] = s->vertices[i].z;
+    }
+    size_t t = 0;
+    for (size_t i = 0; i < s->nfaces; i++) {
+        const uint32_t *v = s->faces[i].v;
+        tri[3 * t] = v[0], tri[3 * t + 1] = v[1], tri[3 * t + 2] = v[2];
+        t++;
+        if (s->faces[i].nverts == 4) {
+            tri[3 * t] = v[0], tri[3 * t + 1] = v[2], tri[3 * t + 2] = v[3];
+            t++;
+        }
+    }
+    int r = rp_cgal_is_closed(xyz, s->nvertices, tri, ntri, RELATIVE_WELD * rp_scene_diagonal(s));
+    free(xyz);
+    free(tri);
+    return r;
+}

@@ -1,0 +1,70 @@
+#include "cli_util.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+static char *slurp(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return calloc(1, 1);
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *s = malloc((size_t)n + 1);
+    size_t got = fread(s, 1, (size_t)n, f);
+    s[got] = '\0';
+    fclose(f);
+    return s;
+}
+
+rp_run rp_run_radpt(const char *args)
+{
+    char out[64], err[64];
+    snprintf(out, sizeof out, "/tmp/rp_test_out.%d", (int)getpid());
+    snprintf(err, sizeof err, "/tmp/rp_test_err.%d", (int)getpid());
+    size_t n = strlen(args) + 1024;
+    char *cmd = malloc(n);
+    snprintf(cmd, n, "cd '%s' && '%s' %s >%s 2>%s </dev/null", RP_SOURCE_DIR, RP_BIN, args, out, err);
+    int st = system(cmd);
+    free(cmd);
+    rp_run r;
+    r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    unlink(out);
+    unlink(err);
+    return r;
+}
+
+void rp_run_free(rp_run *r)
+{
+    free(r->out);
+    free(r->err);
+    r->out = r->err = NULL;
+}
+
+double rp_json_number_after(const char *text, const char *anchor, const char *key)
+{
+    const char *p = strstr(text, anchor);
+    if (!p)
+        return NAN;
+    char pat[128];
+    snprintf(pat, sizeof pat, "\"%s\":", key);
+    p = strstr(p, pat);
+    if (!p)
+        return NAN;
+    return strtod(p + strlen(pat), NULL);
+}
+
+size_t rp_count_lines(const char *s)
+{
+    size_t n = 0;
+    for (; *s; s++)
+        n += *s == '\n';
+    return n;
+}

@@ -1,0 +1,24 @@
+/* Running ./radpt from tests: exit status, stdout and stderr captured. */
+#ifndef RP_TEST_CLI_UTIL_H
+#define RP_TEST_CLI_UTIL_H
+
+#include <stddef.h>
+
+typedef struct rp_run {
+    int status;   /* exit status, or -1 if killed by a signal */
+    char *out;    /* stdout, NUL-terminated (malloc'd) */
+    char *err;    /* stderr */
+} rp_run;
+
+/* Runs "RP_BIN args" from the source directory. */
+rp_run rp_run_radpt(const char *args);
+void rp_run_free(rp_run *r);
+
+/* The number in a JSON object following "key": after the first occurrence
+ * of anchor (a string that must occur in text); NAN if absent. */
+double rp_json_number_after(const char *text, const char *anchor, const char *key);
+
+/* Number of lines in s. */
+size_t rp_count_lines(const char *s);
+
+#endif

@@ -1,0 +1,170 @@
+/* End-to-end: the radpt command as a user runs it (DESIGN.md, "Command
+ * line"): exit statuses, one-line errors, JSON, no partial output files. */
+#include <criterion/criterion.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "cli_util.h"
+
+/* Area of a planar polygon from its vertices (Newell's method), written
+ * here independently of geometry/scene.c. */
+static double polygon_area(const double (*v)[3], int n)
+{
+    double nx = 0, ny = 0, nz = 0;
+    for (int i = 0; i < n; i++) {
+        const double *a = v[i], *b = v[(i + 1) % n];
+        nx += (a[1] - b[1]) * (a[2] + b[2]);
+        ny += (a[2] - b[2]) * (a[0] + b[0]);
+        nz += (a[0] - b[0]) * (a[1] + b[1]);
+    }
+    return 0.5 * sqrt(nx * nx + ny * ny + nz * nz);
+}
+
+static double surface_area(const char *json, const char *name)
+{
+    char anchor[96];
+    snprintf(anchor, sizeof anchor, "\"name\": \"%s\"", name);
+    return rp_json_number_after(json, anchor, "area");
+}
+
+/* ground-truth.md, the Cornell box (millimetres). */
+Test(cli, cornell_info_areas_match_measured_geometry)
+{
+    rp_run r = rp_run_radpt("info scenes/cornell.scene --json");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    const double floor_v[4][3] = {{552.8, 0, 0}, {0, 0, 0}, {0, 0, 559.2}, {549.6, 0, 559.2}};
+    const double back_v[4][3] = {{549.6, 0, 559.2}, {0, 0, 559.2}, {0, 548.8, 559.2}, {556.0, 548.8, 559.2}};
+    const double green_v[4][3] = {{0, 0, 559.2}, {0, 0, 0}, {0, 548.8, 0}, {0, 548.8, 559.2}};
+    const double red_a[3][3] = {{552.8, 0, 0}, {549.6, 0, 559.2}, {556.0, 548.8, 559.2}};
+    const double red_b[3][3] = {{552.8, 0, 0}, {556.0, 548.8, 559.2}, {556.0, 548.8, 0}};
+    const double light = 130.0 * 105.0;
+    const double ceiling = 556.0 * 559.2 - light;
+    const double tol = 1e-4; /* 0.01% */
+
+    double floor = surface_area(r.out, "floor");
+    cr_expect(fabs(floor / polygon_area(floor_v, 4) - 1) < tol, "floor %g", floor);
+    cr_expect(fabs(surface_area(r.out, "back") / polygon_area(back_v, 4) - 1) < tol);
+    cr_expect(fabs(surface_area(r.out, "right-green") / polygon_area(green_v, 4) - 1) < tol);
+    double red = surface_area(r.out, "left-red-low") + surface_area(r.out, "left-red-high");
+    cr_expect(fabs(red / (polygon_area(red_a, 3) + polygon_area(red_b, 3)) - 1) < tol, "red %g", red);
+    cr_expect(fabs(surface_area(r.out, "light") / light - 1) < tol);
+    double ceil_sum = surface_area(r.out, "ceiling-front") + surface_area(r.out, "ceiling-back") +
+                      surface_area(r.out, "ceiling-left") + surface_area(r.out, "ceiling-right");
+    cr_expect(fabs(ceil_sum / ceiling - 1) < tol, "ceiling %g vs %g", ceil_sum, ceiling);
+    /* Short block top: 130 165 65 | 82 165 225 | 240 165 272 | 290 165 114 */
+    const double short_top[4][3] = {{130, 165, 65}, {82, 165, 225}, {240, 165, 272}, {290, 165, 114}};
+    cr_expect(fabs(surface_area(r.out, "short-top") / polygon_area(short_top, 4) - 1) < tol);
+    cr_expect(strstr(r.out, "\"closed\": false") != NULL, "the Cornell box is open");
+    rp_run_free(&r);
+}
+
+Test(cli, furnace_is_closed)
+{
+    rp_run r = rp_run_radpt("info scenes/furnace.scene --json");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.out, "\"closed\": true") != NULL, "%s", r.out);
+    rp_run_free(&r);
+}
+
+Test(cli, unknown_method_lists_the_known_ones)
+{
+    rp_run r = rp_run_radpt("render scenes/cornell.scene --method nosuch -o /tmp/rp_nosuch.exr");
+    cr_expect_eq(r.status, 2);
+    cr_expect(strstr(r.err, "nosuch") && strstr(r.err, "pathtrace"), "stderr: %s", r.err);
+    cr_expect(access("/tmp/rp_nosuch.exr", F_OK) != 0);
+    rp_run_free(&r);
+}
+
+Test(cli, usage_errors_exit_2)
+{
+    const char *cases[] = {
+        "",
+        "frobnicate scenes/cornell.scene",
+        "info",
+        "info scenes/cornell.scene --bogus",
+        "render scenes/cornell.scene -o /tmp/x.exr",
+        "render scenes/cornell.scene --method pathtrace",
+        "render scenes/cornell.scene --method pathtrace --threads 0 -o /tmp/x.exr",
+        "render scenes/cornell.scene --method pathtrace --time -3 -o /tmp/x.exr",
+        "render scenes/cornell.scene --method pathtrace --seed banana -o /tmp/x.exr",
+        "render scenes/cornell.scene --method pathtrace --spp 0 -o /tmp/x.exr",
+        "render scenes/cornell.scene --method pathtrace --no-such-option 3 -o /tmp/x.exr",
+        "probe scenes/cornell.scene --method pathtrace",
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        rp_run r = rp_run_radpt(cases[i]);
+        cr_expect_eq(r.status, 2, "'%s' exited %d; stderr: %s", cases[i], r.status, r.err);
+        cr_expect(r.err[0] != '\0', "'%s' says nothing on stderr", cases[i]);
+        rp_run_free(&r);
+    }
+    cr_expect(access("/tmp/x.exr", F_OK) != 0, "no output file from a refused run");
+}
+
+Test(cli, help_lists_commands_and_methods)
+{
+    rp_run r = rp_run_radpt("help");
+    cr_expect_eq(r.status, 0);
+    cr_expect(strstr(r.out, "radpt info") && strstr(r.out, "radpt render") && strstr(r.out, "pathtrace"));
+    rp_run_free(&r);
+    r = rp_run_radpt("help pathtrace");
+    cr_expect_eq(r.status, 0);
+    cr_expect(strstr(r.out, "--spp") && strstr(r.out, "--sampler"), "%s", r.out);
+    rp_run_free(&r);
+}
+
+/* Every malformed scene in tests/bad/ gets one line, FILE:LINE:, status 2. */
+Test(cli, bad_scenes_one_line_error_status_2)
+{
+    FILE *ls = popen("cd '" RP_SOURCE_DIR "' && ls tests/bad/*.scene", "r");
+    cr_assert(ls);
+    char path[512];
+    int n = 0;
+    while (fgets(path, sizeof path, ls)) {
+        path[strcspn(path, "\n")] = '\0';
+        char args[600];
+        snprintf(args, sizeof args, "info %s", path);
+        rp_run r = rp_run_radpt(args);
+        cr_expect_eq(r.status, 2, "%s exited %d", path, r.status);
+        cr_expect_eq(rp_count_lines(r.err), 1, "%s: stderr has %zu lines: %s", path,
+                     rp_count_lines(r.err), r.err);
+        /* "radpt: FILE:LINE: what" where FILE is the scene or what it includes */
+        const char *msg = strncmp(r.err, "radpt: ", 7) == 0 ? r.err + 7 : r.err;
+        const char *colon = strchr(msg, ':');
+        cr_expect(colon && colon[1] >= '0' && colon[1] <= '9', "%s: no FILE:LINE: in '%s'", path, r.err);
+        cr_expect_eq(r.out[0], '\0', "%s: printed on stdout", path);
+        rp_run_free(&r);
+        n++;
+    }
+    pclose(ls);
+    cr_expect(n >= 20, "only %d bad scenes", n);
+}
+
+Test(cli, render_writes_exr_with_metadata_and_fails_cleanly)
+{
+    unlink("/tmp/rp_cli_furnace.exr");
+    rp_run r = rp_run_radpt("render scenes/furnace.scene --method pathtrace --spp 2 --seed 7 "
+                            "-o /tmp/rp_cli_furnace.exr");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(access("/tmp/rp_cli_furnace.exr", F_OK) == 0);
+    rp_run_free(&r);
+    FILE *h = popen("exrheader /tmp/rp_cli_furnace.exr 2>&1", "r");
+    if (h) {
+        char buf[8192];
+        size_t got = fread(buf, 1, sizeof buf - 1, h);
+        buf[got] = '\0';
+        pclose(h);
+        if (strstr(buf, "channels")) {
+            cr_expect(strstr(buf, "Y, 32-bit floating-point") != NULL, "%s", buf);
+            cr_expect(strstr(buf, "radpt:seed") && strstr(buf, "radpt:method"), "%s", buf);
+        }
+    }
+    unlink("/tmp/rp_cli_furnace.exr");
+
+    r = rp_run_radpt("render scenes/furnace.scene --method pathtrace --spp 1 "
+                     "-o /tmp/rp-no-such-dir/out.exr");
+    cr_expect_eq(r.status, 1, "stderr: %s", r.err);
+    cr_expect(access("/tmp/rp-no-such-dir", F_OK) != 0);
+    rp_run_free(&r);
+}
