@@ -26,7 +26,9 @@ static double surface_area(const char *json, const char *name)
 {
     char anchor[96];
     snprintf(anchor, sizeof anchor, "\"name\": \"%s\"", name);
-    return rp_json_number_after(json, anchor, "area");
+    /* surfaces come after materials, which may share a name ("light") */
+    const char *surfaces = strstr(json, "\"surfaces\":");
+    return surfaces ? rp_json_number_after(surfaces, anchor, "area") : NAN;
 }
 
 /* ground-truth.md, the Cornell box (millimetres). */
