@@ -100,8 +100,12 @@ demo: deps
 	@mkdir -p out
 	./radpt render scenes/cornell.scene --method pathtrace --spp 64 -o out/cornell.exr --png out/cornell.png
 
-bench: radpt meshes
-	./radpt info scenes/cornell.scene
+# Performance: the path tracer against the random-ray limit on the Cornell
+# box at 256 x 256, then the samplers at equal time.
+bench: deps
+	@$(MAKE) --no-print-directory radpt meshes
+	./radpt throughput scenes/cornell.scene --spp 64
+	./radpt samplers scenes/cornell.scene --time 2 --seeds 3 --reference-spp 1024
 
 clean:
 	rm -rf build build-asan radpt scenes/data

@@ -5,5 +5,8 @@
 int rp_cmd_info(int argc, char **argv);
 int rp_cmd_render(int argc, char **argv);
 int rp_cmd_probe(int argc, char **argv);
+int rp_cmd_formfactor(int argc, char **argv);
+int rp_cmd_throughput(int argc, char **argv);
+int rp_cmd_samplers(int argc, char **argv);
 
 #endif

@@ -18,6 +18,12 @@ static void print_usage(FILE *f)
           "  radpt probe SCENE --method M [method options] --surface-averages [--json]\n"
           "               [--seed S] [--threads T] [--time SECONDS]\n"
           "      area-averaged outgoing radiance of every surface, with standard errors\n"
+          "  radpt throughput SCENE [--spp N] [--rays N] [--threads T] [--json]\n"
+          "      the random-ray limit of the ray caster, then the path tracer's rays/s,\n"
+          "      paths/s and their fraction of that limit, in one run\n"
+          "  radpt samplers SCENE [--time SECONDS] [--seeds N] [--reference-spp N] [--json]\n"
+          "      random, stratified and Sobol' sampling at equal time: RMSE against a\n"
+          "      reference rendered with another seed\n"
           "  radpt help [METHOD]\n"
           "      this text, or a method's options\n"
           "\n"
@@ -77,6 +83,10 @@ int main(int argc, char **argv)
         return rp_cmd_render(argc, argv);
     if (!strcmp(cmd, "probe"))
         return rp_cmd_probe(argc, argv);
+    if (!strcmp(cmd, "throughput"))
+        return rp_cmd_throughput(argc, argv);
+    if (!strcmp(cmd, "samplers"))
+        return rp_cmd_samplers(argc, argv);
     fprintf(stderr, "radpt: unknown command '%s'\n", cmd);
     print_usage(stderr);
     return 2;

@@ -1,0 +1,209 @@
+/* radpt throughput and radpt samplers: the path tracer's performance
+ * benchmarks (make bench).
+ *
+ * throughput: the random-ray limit (bench/raybench.c: incoherent closest-hit
+ * rays through the same Embree scene) and the path tracer's rays/s and
+ * paths/s, measured in one process, one after the other, so their ratio is
+ * meaningful on a shared, noisy machine.
+ *
+ * samplers: each sampler renders for the same wall time; their RMSE
+ * against a reference rendered with another seed says which wins at equal
+ * time. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../geometry/raycast.h"
+#include "../geometry/scene.h"
+#include "../solvers/solver.h"
+#include "cli.h"
+#include "commands.h"
+#include "raybench.h"
+
+static int parse_count(const rp_cli *cli, const char *name, unsigned long fallback, unsigned long *out)
+{
+    const char *v = rp_cli_extra(cli, name);
+    *out = fallback;
+    if (!v)
+        return 0;
+    char *end;
+    unsigned long x = strtoul(v, &end, 10);
+    if (end == v || *end || x == 0 || *v == '-') {
+        fprintf(stderr, "radpt %s: --%s: '%s' is not a positive whole number\n", cli->command, name, v);
+        return 2;
+    }
+    *out = x;
+    return 0;
+}
+
+/* Renders with pathtrace until spp passes or `seconds` (if > 0) elapse;
+ * fills image (npix * nbands) and the totals. */
+static rp_status render(const rp_scene *scene, const char *sampler, unsigned long spp, double seconds,
+                        uint64_t seed, int threads, float *image, double *rays, double *paths,
+                        double *elapsed, double *samples, rp_error *err)
+{
+    char spp_text[32];
+    snprintf(spp_text, sizeof spp_text, "%lu", spp);
+    const char *keys[2] = {"sampler", "spp"};
+    const char *values[2] = {sampler, spp_text};
+    rp_options o = {.size = sizeof o, .want = RP_WANT_IMAGE, .seed = seed, .threads = threads,
+                    .keys = keys, .values = values, .count = seconds > 0 ? 1 : 2,
+                    .open_ended = seconds > 0};
+    rp_solver *s = NULL;
+    rp_status st = rp_solver_create(rp_solver_lookup("pathtrace"), scene, &o, &s, err);
+    if (st != RP_OK)
+        return st;
+    *rays = *paths = 0;
+    double t0 = rp_clock();
+    for (;;) {
+        rp_step_info info;
+        st = rp_solver_step(s, &info, err);
+        if (st != RP_OK)
+            break;
+        *rays += info.rays;
+        *paths += info.paths;
+        *elapsed = rp_clock() - t0;
+        if (info.converged || (seconds > 0 && *elapsed >= seconds))
+            break;
+    }
+    if (st == RP_OK) {
+        rp_estimate est = {.radiance = image};
+        st = rp_solver_estimate(s, &est, err);
+        *samples = est.samples;
+    }
+    rp_solver_destroy(s);
+    return st;
+}
+
+int rp_cmd_throughput(int argc, char **argv)
+{
+    static const char *const extra[] = {"spp", "rays", NULL};
+    rp_cli cli = {.command = "throughput"};
+    int rc = rp_cli_parse(&cli, argc, argv, extra, 0);
+    if (rc)
+        return rc;
+    unsigned long spp, nrays;
+    if ((rc = parse_count(&cli, "spp", 64, &spp)) || (rc = parse_count(&cli, "rays", 20000000, &nrays)))
+        return rc;
+    rp_error err;
+    rp_scene *scene = NULL;
+    rp_raycast *rc_ = NULL;
+    float *image = NULL;
+    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    if (st == RP_OK)
+        st = rp_raycast_create(scene, NULL, &rc_, &err);
+    double limit = 0;
+    if (st == RP_OK) {
+        fprintf(stderr, "casting %lu random rays...\n", nrays);
+        st = rp_raybench_run(scene, rc_, nrays, cli.threads, cli.seed, &limit, &err);
+    }
+    const rp_camera *cam = scene ? rp_scene_camera(scene) : NULL;
+    if (st == RP_OK && !cam)
+        st = rp_error_set(&err, RP_ERR_INPUT, "%s: the scene has no camera", cli.scene);
+    double rays = 0, paths = 0, seconds = 0, samples = 0;
+    if (st == RP_OK) {
+        image = malloc((size_t)cam->width * cam->height * rp_scene_nbands(scene) * sizeof *image);
+        if (!image)
+            st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory");
+    }
+    if (st == RP_OK) {
+        fprintf(stderr, "path tracing %lu spp...\n", spp);
+        st = render(scene, "sobol", spp, 0, cli.seed, cli.threads, image, &rays, &paths, &seconds,
+                    &samples, &err);
+    }
+    if (st == RP_OK) {
+        double rps = rays / seconds;
+        if (cli.json) {
+            printf("{\"scene\": ");
+            rp_json_string(stdout, cli.scene);
+            printf(", \"width\": %u, \"height\": %u, \"spp\": %.0f, \"threads\": %d, "
+                   "\"random_rays_per_s\": %.6g, \"pathtrace_seconds\": %.6g, \"paths_per_s\": %.6g, "
+                   "\"rays_per_s\": %.6g, \"fraction_of_limit\": %.4f}\n",
+                   cam->width, cam->height, samples, cli.threads, limit, seconds, paths / seconds, rps,
+                   rps / limit);
+        } else {
+            printf("scene             %s, %u x %u, %.0f spp, threads %s\n", cli.scene, cam->width,
+                   cam->height, samples, cli.threads ? "as given" : "all");
+            printf("random-ray limit  %.4g rays/s (%lu incoherent closest-hit rays)\n", limit, nrays);
+            printf("path tracer       %.3f s, %.4g paths/s, %.4g rays/s\n", seconds, paths / seconds, rps);
+            printf("fraction          %.3f of the random-ray limit\n", rps / limit);
+        }
+    }
+    free(image);
+    rp_raycast_destroy(rc_);
+    rp_scene_destroy(scene);
+    return st == RP_OK ? 0 : rp_cli_fail(st, &err);
+}
+
+int rp_cmd_samplers(int argc, char **argv)
+{
+    static const char *const extra[] = {"reference-spp", "seeds", NULL};
+    rp_cli cli = {.command = "samplers"};
+    int rc = rp_cli_parse(&cli, argc, argv, extra, 0);
+    if (rc)
+        return rc;
+    unsigned long ref_spp, nseeds;
+    if ((rc = parse_count(&cli, "reference-spp", 1024, &ref_spp)) ||
+        (rc = parse_count(&cli, "seeds", 3, &nseeds)))
+        return rc;
+    double budget = cli.time_budget > 0 ? cli.time_budget : 1.0;
+    rp_error err;
+    rp_scene *scene = NULL;
+    float *ref = NULL, *img = NULL;
+    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    const rp_camera *cam = scene ? rp_scene_camera(scene) : NULL;
+    if (st == RP_OK && !cam)
+        st = rp_error_set(&err, RP_ERR_INPUT, "%s: the scene has no camera", cli.scene);
+    size_t n = cam ? (size_t)cam->width * cam->height * rp_scene_nbands(scene) : 0;
+    if (st == RP_OK) {
+        ref = malloc(n * sizeof *ref);
+        img = malloc(n * sizeof *img);
+        if (!ref || !img)
+            st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory");
+    }
+    double rays, paths, secs, samples;
+    if (st == RP_OK) {
+        fprintf(stderr, "reference: sobol, %lu spp...\n", ref_spp);
+        /* a seed no run below uses */
+        st = render(scene, "sobol", ref_spp, 0, cli.seed + 1000003, cli.threads, ref, &rays, &paths,
+                    &secs, &samples, &err);
+    }
+    static const char *const names[] = {"random", "stratified", "sobol"};
+    if (st == RP_OK && !cli.json)
+        printf("# %s, equal time %.3g s per run, %lu seeds, reference %lu spp (sobol, %.1f s)\n"
+               "%-12s %10s %12s %12s\n",
+               cli.scene, budget, nseeds, ref_spp, secs, "sampler", "mean spp", "RMSE", "RMSE spread");
+    if (st == RP_OK && cli.json)
+        printf("{\"scene\": \"%s\", \"seconds\": %g, \"reference_spp\": %lu, \"samplers\": [", cli.scene,
+               budget, ref_spp);
+    for (int k = 0; k < 3 && st == RP_OK; k++) {
+        double sum = 0, sum2 = 0, spp_sum = 0;
+        for (unsigned long s = 0; s < nseeds && st == RP_OK; s++) {
+            fprintf(stderr, "%s, seed %lu...\n", names[k], cli.seed + s);
+            st = render(scene, names[k], 1u << 30, budget, cli.seed + s, cli.threads, img, &rays, &paths,
+                        &secs, &samples, &err);
+            double se = 0;
+            for (size_t i = 0; i < n; i++)
+                se += ((double)img[i] - ref[i]) * ((double)img[i] - ref[i]);
+            double rmse = sqrt(se / (double)n);
+            sum += rmse;
+            sum2 += rmse * rmse;
+            spp_sum += samples;
+        }
+        double mean = sum / (double)nseeds;
+        double sd = nseeds > 1 ? sqrt(fmax(0, (sum2 - sum * mean) / (double)(nseeds - 1))) : 0;
+        if (cli.json)
+            printf("%s{\"sampler\": \"%s\", \"mean_spp\": %.1f, \"rmse\": %.6g, \"rmse_sd\": %.3g}",
+                   k ? ", " : "", names[k], spp_sum / (double)nseeds, mean, sd);
+        else
+            printf("%-12s %10.1f %12.6g %12.3g\n", names[k], spp_sum / (double)nseeds, mean, sd);
+        fflush(stdout);
+    }
+    if (st == RP_OK && cli.json)
+        printf("]}\n");
+    free(ref);
+    free(img);
+    rp_scene_destroy(scene);
+    return st == RP_OK ? 0 : rp_cli_fail(st, &err);
+}
