@@ -4,6 +4,7 @@
  * met or the --time budget runs out, then estimate once; the cost of the
  * estimate is not solver time. */
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -14,6 +15,26 @@
 #include "commands.h"
 #include "image.h"
 #include "spectrum.h"
+
+/* SIGINT / SIGTERM stop a run at the next step boundary: the image reached
+ * so far is still written (marked interrupted), and the exit status is 1. */
+static volatile sig_atomic_t interrupted;
+
+static void on_signal(int sig)
+{
+    (void)sig;
+    interrupted = 1;
+}
+
+static void catch_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+}
 
 typedef struct run_totals {
     rp_step_info sum;   /* rays, paths, form factors, iterations added up */
@@ -27,6 +48,7 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
 {
     rp_progress bar;
     rp_progress_begin(&bar, label);
+    catch_signals();
     memset(tot, 0, sizeof *tot);
     double t0 = rp_clock();
     for (;;) {
@@ -49,7 +71,7 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
         char detail[96];
         snprintf(detail, sizeof detail, "%.0f iterations, %.1f s", tot->sum.iterations, tot->seconds);
         rp_progress_update(&bar, frac, detail);
-        if (info.converged || (cli->time_budget > 0 && tot->seconds >= cli->time_budget))
+        if (info.converged || (cli->time_budget > 0 && tot->seconds >= cli->time_budget) || interrupted)
             break;
     }
     rp_progress_end(&bar);
@@ -187,6 +209,12 @@ int rp_cmd_render(int argc, char **argv)
     st = rp_solver_estimate(solver, &est, &err);
     if (st != RP_OK)
         goto done;
+    for (size_t i = 0; i < npix * nb; i++)
+        if (!isfinite(radiance[i])) {
+            st = rp_error_set(&err, RP_ERR_RUNTIME, "method %s produced a non-finite radiance at pixel (%zu, %zu); "
+                              "no image written", cli.method, (i / nb) % cam->width, (i / nb) / cam->width);
+            goto done;
+        }
     st = planes_make(scene, radiance, npix, &planes, &err);
     if (st != RP_OK)
         goto done;
@@ -203,6 +231,7 @@ int rp_cmd_render(int argc, char **argv)
         {"radpt:scene", cli.scene}, {"radpt:scene_hash", hash}, {"radpt:method", cli.method},
         {"radpt:options", optstr},  {"radpt:seed", seed},       {"radpt:samples", samples},
         {"radpt:seconds", seconds}, {"radpt:threads", threads}, {"radpt:rays", rays},
+        {"radpt:interrupted", interrupted ? "yes" : "no"},
     };
     rp_image img = {
         .width = cam->width, .height = cam->height, .nchannels = planes.nchannels,
@@ -230,6 +259,9 @@ int rp_cmd_render(int argc, char **argv)
     printf("\n");
     if (cli.png)
         printf("wrote %s\n", cli.png);
+    if (interrupted)
+        st = rp_error_set(&err, RP_ERR_RUNTIME, "interrupted after %.17g samples; wrote what was reached",
+                          est.samples);
 done:
     planes_free(&planes);
     free(radiance);
@@ -275,6 +307,8 @@ int rp_cmd_probe(int argc, char **argv)
     st = rp_solver_estimate(solver, &est, &err);
     if (st != RP_OK)
         goto done;
+    if (interrupted)
+        fprintf(stderr, "radpt probe: interrupted; printing what was reached\n");
     for (size_t i = 0; i < ns * nb; i++)
         if (!isfinite(mean[i]) || !isfinite(se[i])) {
             st = rp_error_set(&err, RP_ERR_RUNTIME, "method %s produced a non-finite value", cli.method);
@@ -313,6 +347,8 @@ int rp_cmd_probe(int argc, char **argv)
             printf("\n");
         }
     }
+    if (interrupted)
+        st = rp_error_set(&err, RP_ERR_RUNTIME, "interrupted after %.17g samples", est.samples);
 done:
     free(mean);
     free(se);
