@@ -40,7 +40,7 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off
 
-.PHONY: all deps test check asan demo bench clean meshes
+.PHONY: all deps test check asan demo bench clean meshes fuzz fuzz-deps
 all: radpt meshes
 
 radpt: $(BUILD)/radpt
@@ -107,7 +107,41 @@ bench: deps
 	./radpt throughput scenes/cornell.scene --spp 64
 	./radpt samplers scenes/cornell.scene --time 2 --seeds 3 --reference-spp 1024
 
+# Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
+# for FUZZ_SECONDS; new corpus entries land in tests/fuzz/<target>/.
+FUZZ_SECONDS ?= 60
+FUZZ_BUILD := build-fuzz
+FUZZ_FLAGS := -g -O1 -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
+FUZZ_LIB_OBJ := $(patsubst %.c,$(FUZZ_BUILD)/%.o,$(wildcard geometry/*.c)) $(LIB_CXX:%.cpp=$(FUZZ_BUILD)/%.o)
+
+fuzz-deps:
+	@dpkg -s clang libclang-rt-14-dev >/dev/null 2>&1 || { \
+	    SUDO=; [ "$$(id -u)" -eq 0 ] || SUDO=sudo; \
+	    $$SUDO apt-get update -qq && \
+	    DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends clang libclang-rt-14-dev; }
+
+fuzz: deps fuzz-deps
+	@$(MAKE) --no-print-directory $(FUZZ_BUILD)/fuzz_scene $(FUZZ_BUILD)/fuzz_mesh
+	@mkdir -p tests/fuzz/scene tests/fuzz/mesh
+	$(FUZZ_BUILD)/fuzz_scene -max_total_time=$(FUZZ_SECONDS) -max_len=4096 \
+	    tests/fuzz/scene scenes tests/bad tests/data
+	$(FUZZ_BUILD)/fuzz_mesh -max_total_time=$(FUZZ_SECONDS) -max_len=4096 tests/fuzz/mesh
+
+$(FUZZ_BUILD)/%.o: %.c
+	@mkdir -p $(dir $@)
+	clang $(CPPFLAGS) -std=c11 -Wall -Wextra $(FUZZ_FLAGS) -c -o $@ $<
+
+$(FUZZ_BUILD)/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	clang++ $(CPPFLAGS) -std=c++17 -O1 -DCGAL_DISABLE_GMPXX -fsanitize=fuzzer-no-link,address,undefined -c -o $@ $<
+
+# Linked by clang++: UBSan's C++ runtime (vptr checks in the CGAL shim).
+$(FUZZ_BUILD)/fuzz_%: $(FUZZ_BUILD)/tests/fuzz/fuzz_%.o $(FUZZ_LIB_OBJ)
+	clang++ -fsanitize=fuzzer,address,undefined -o $@ $^ $(LDLIBS)
+
+.SECONDARY: $(FUZZ_LIB_OBJ)
+
 clean:
-	rm -rf build build-asan radpt scenes/data
+	rm -rf build build-asan build-fuzz radpt scenes/data
 
 -include $(LIB_OBJ:.o=.d) $(TEST_OBJ:.o=.d) $(BUILD)/bench/main.d
