@@ -57,6 +57,8 @@ typedef struct rp_step_info {
     double unshot;        /* unshot power fraction, or -1 */
     int converged;        /* the method's own stopping rule is met */
     double progress;      /* fraction of the way to that rule, in [0, 1] */
+    double memory;        /* bytes the method holds after the step (matrices,
+                             buffers), 0 if not reported */
 } rp_step_info;
 
 /* Answers in the common space: radiance, W sr^-1 m^-2, per band.  The
