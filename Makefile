@@ -105,7 +105,7 @@ demo: deps
 bench: deps
 	@$(MAKE) --no-print-directory radpt meshes
 	./radpt throughput scenes/cornell.scene --spp 64
-	./radpt samplers scenes/cornell.scene --time 2 --seeds 3 --reference-spp 1024
+	./radpt samplers scenes/cornell.scene --spp 64 --seeds 3 --reference-spp 1024
 
 # Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
 # for FUZZ_SECONDS; new corpus entries land in tests/fuzz/<target>/.

@@ -138,16 +138,15 @@ int rp_cmd_throughput(int argc, char **argv)
 
 int rp_cmd_samplers(int argc, char **argv)
 {
-    static const char *const extra[] = {"reference-spp", "seeds", NULL};
+    static const char *const extra[] = {"spp", "reference-spp", "seeds", NULL};
     rp_cli cli = {.command = "samplers"};
     int rc = rp_cli_parse(&cli, argc, argv, extra, 0);
     if (rc)
         return rc;
-    unsigned long ref_spp, nseeds;
-    if ((rc = parse_count(&cli, "reference-spp", 1024, &ref_spp)) ||
+    unsigned long spp, ref_spp, nseeds;
+    if ((rc = parse_count(&cli, "spp", 64, &spp)) || (rc = parse_count(&cli, "reference-spp", 1024, &ref_spp)) ||
         (rc = parse_count(&cli, "seeds", 3, &nseeds)))
         return rc;
-    double budget = cli.time_budget > 0 ? cli.time_budget : 1.0;
     rp_error err;
     rp_scene *scene = NULL;
     float *ref = NULL, *img = NULL;
@@ -162,42 +161,56 @@ int rp_cmd_samplers(int argc, char **argv)
         if (!ref || !img)
             st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory");
     }
-    double rays, paths, secs, samples;
+    double rays, paths, secs, samples, ref_secs = 0;
     if (st == RP_OK) {
         fprintf(stderr, "reference: sobol, %lu spp...\n", ref_spp);
         /* a seed no run below uses */
         st = render(scene, "sobol", ref_spp, 0, cli.seed + 1000003, cli.threads, ref, &rays, &paths,
-                    &secs, &samples, &err);
+                    &ref_secs, &samples, &err);
     }
+    /* Each sampler renders the same spp; at equal time the error of an
+     * unbiased estimator scales as MSE * seconds (its inverse is the usual
+     * efficiency, Veach 1997 sec. 2.4 / Pharr et al.), so that product ranks
+     * them at equal time without relying on noisy wall-clock stops. */
     static const char *const names[] = {"random", "stratified", "sobol"};
+    double eff[3] = {0};
     if (st == RP_OK && !cli.json)
-        printf("# %s, equal time %.3g s per run, %lu seeds, reference %lu spp (sobol, %.1f s)\n"
-               "%-12s %10s %12s %12s\n",
-               cli.scene, budget, nseeds, ref_spp, secs, "sampler", "mean spp", "RMSE", "RMSE spread");
+        printf("# %s, %lu spp, %lu seeds; reference %lu spp (sobol, other seed, %.1f s)\n"
+               "# MSE x s: mean squared error times render seconds (lower wins at equal time)\n"
+               "%-12s %8s %12s %12s %12s %12s\n",
+               cli.scene, spp, nseeds, ref_spp, ref_secs, "sampler", "seconds", "RMSE", "RMSE sd",
+               "MSE x s", "vs random");
     if (st == RP_OK && cli.json)
-        printf("{\"scene\": \"%s\", \"seconds\": %g, \"reference_spp\": %lu, \"samplers\": [", cli.scene,
-               budget, ref_spp);
+        printf("{\"scene\": \"%s\", \"spp\": %lu, \"seeds\": %lu, \"reference_spp\": %lu, \"samplers\": [",
+               cli.scene, spp, nseeds, ref_spp);
     for (int k = 0; k < 3 && st == RP_OK; k++) {
-        double sum = 0, sum2 = 0, spp_sum = 0;
+        double sum = 0, sum2 = 0, mse_sum = 0, sec_sum = 0;
         for (unsigned long s = 0; s < nseeds && st == RP_OK; s++) {
             fprintf(stderr, "%s, seed %lu...\n", names[k], cli.seed + s);
-            st = render(scene, names[k], 1u << 30, budget, cli.seed + s, cli.threads, img, &rays, &paths,
-                        &secs, &samples, &err);
+            st = render(scene, names[k], spp, 0, cli.seed + s, cli.threads, img, &rays, &paths, &secs,
+                        &samples, &err);
             double se = 0;
             for (size_t i = 0; i < n; i++)
                 se += ((double)img[i] - ref[i]) * ((double)img[i] - ref[i]);
-            double rmse = sqrt(se / (double)n);
-            sum += rmse;
-            sum2 += rmse * rmse;
-            spp_sum += samples;
+            double mse = se / (double)n;
+            sum += sqrt(mse);
+            sum2 += mse;
+            mse_sum += mse;
+            sec_sum += secs;
         }
+        if (st != RP_OK)
+            break;
         double mean = sum / (double)nseeds;
         double sd = nseeds > 1 ? sqrt(fmax(0, (sum2 - sum * mean) / (double)(nseeds - 1))) : 0;
+        double secs_mean = sec_sum / (double)nseeds, mse_mean = mse_sum / (double)nseeds;
+        eff[k] = mse_mean * secs_mean;
         if (cli.json)
-            printf("%s{\"sampler\": \"%s\", \"mean_spp\": %.1f, \"rmse\": %.6g, \"rmse_sd\": %.3g}",
-                   k ? ", " : "", names[k], spp_sum / (double)nseeds, mean, sd);
+            printf("%s{\"sampler\": \"%s\", \"seconds\": %.4g, \"rmse\": %.6g, \"rmse_sd\": %.3g, "
+                   "\"mse_times_seconds\": %.6g}",
+                   k ? ", " : "", names[k], secs_mean, mean, sd, eff[k]);
         else
-            printf("%-12s %10.1f %12.6g %12.3g\n", names[k], spp_sum / (double)nseeds, mean, sd);
+            printf("%-12s %8.3f %12.6g %12.3g %12.4g %11.2fx\n", names[k], secs_mean, mean, sd, eff[k],
+                   eff[0] / eff[k]);
         fflush(stdout);
     }
     if (st == RP_OK && cli.json)
