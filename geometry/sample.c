@@ -25,8 +25,48 @@ struct rp_area_sampler {
     size_t count;              /* faces with non-zero weight */
     uint32_t *faces;           /* [count]: alias-table index -> scene face */
     double *pdf;               /* [nfaces of the scene]: pdf_area per face */
+    double *share;             /* [count]: a quad's first-triangle area share,
+                                  cached: it costs three square roots */
     gsl_ran_discrete_t *table; /* NULL when count == 0 */
 };
+
+/* Uniform point on triangle (a, b, c): barycentrics (1 - sqrt u1,
+ * u2 sqrt u1) (Shirley 1992). */
+static rp_vec3 rp_triangle_sample(rp_vec3 a, rp_vec3 b, rp_vec3 c, double u1, double u2)
+{
+    double su = sqrt(u1);
+    double b1 = u2 * su;  /* weight of b */
+    double b2 = 1.0 - su; /* weight of a */
+    return rp_v3_add(rp_v3_scale(a, b2),
+                     rp_v3_add(rp_v3_scale(b, b1), rp_v3_scale(c, 1.0 - b1 - b2)));
+}
+
+/* A convex quad is sampled as triangles (v0, v1, v2) and (v0, v2, v3)
+ * chosen by area: the first one's share of the area (1 for triangles). */
+static double quad_share(const rp_scene *scene, const rp_face *fc)
+{
+    if (fc->nverts == 3)
+        return 1.0;
+    const rp_vec3 *v = rp_scene_vertices(scene);
+    rp_vec3 a = v[fc->v[0]], e = rp_v3_sub(v[fc->v[2]], a);
+    double a1 = rp_v3_length(rp_v3_cross(rp_v3_sub(v[fc->v[1]], a), e));
+    double a2 = rp_v3_length(rp_v3_cross(e, rp_v3_sub(v[fc->v[3]], a)));
+    return a1 / (a1 + a2);
+}
+
+static rp_vec3 face_point(const rp_scene *scene, const rp_face *fc, double share, double u1, double u2)
+{
+    const rp_vec3 *v = rp_scene_vertices(scene);
+    rp_vec3 a = v[fc->v[0]], b = v[fc->v[1]], c = v[fc->v[2]];
+    if (fc->nverts == 3)
+        return rp_triangle_sample(a, b, c, u1, u2);
+    if (u1 < share) {
+        u1 /= share;
+        return rp_triangle_sample(a, b, c, u1 < 1.0 ? u1 : 1.0, u2);
+    }
+    u1 = (u1 - share) / (1.0 - share);
+    return rp_triangle_sample(a, c, v[fc->v[3]], u1 < 1.0 ? u1 : 1.0, u2);
+}
 
 void rp_area_sampler_destroy(rp_area_sampler *s)
 {
@@ -35,6 +75,7 @@ void rp_area_sampler_destroy(rp_area_sampler *s)
     gsl_ran_discrete_free(s->table);
     free(s->faces);
     free(s->pdf);
+    free(s->share);
     free(s);
 }
 
@@ -62,8 +103,9 @@ rp_status rp_area_sampler_create(const rp_scene *scene, uint32_t surface, rp_are
         s->scene = scene;
         s->pdf = calloc(nfaces ? nfaces : 1, sizeof *s->pdf);
         s->faces = malloc((nfaces ? nfaces : 1) * sizeof *s->faces);
+        s->share = malloc((nfaces ? nfaces : 1) * sizeof *s->share);
     }
-    if (!s || !w || !s->pdf || !s->faces) {
+    if (!s || !w || !s->pdf || !s->faces || !s->share) {
         free(w);
         rp_area_sampler_destroy(s);
         return rp_error_set(err, RP_ERR_NOMEM, "area sampler: out of memory for %zu faces", nfaces);
@@ -92,6 +134,7 @@ rp_status rp_area_sampler_create(const rp_scene *scene, uint32_t surface, rp_are
         for (size_t i = 0; i < s->count; i++) {
             uint32_t f = s->faces[i];
             s->pdf[f] = w[i] / (total * faces[f].area);
+            s->share[i] = quad_share(scene, &faces[f]);
         }
         s->table = gsl_ran_discrete_preproc(s->count, w);
         if (!s->table) {
@@ -135,9 +178,10 @@ void rp_area_sampler_sample(const rp_area_sampler *s, double u0, double u1, doub
     }
     if (!(u0 >= 0))
         u0 = 0;
-    uint32_t f = s->faces[rp_alias_lookup(s->table, u0)];
+    size_t k = rp_alias_lookup(s->table, u0);
+    uint32_t f = s->faces[k];
     const rp_face *fc = &rp_scene_faces(s->scene)[f];
-    out->p = rp_face_sample_uniform(s->scene, f, u1, u2);
+    out->p = face_point(s->scene, fc, s->share[k], u1, u2);
     out->n = fc->normal;
     out->face = f;
     out->surface = fc->surface;
@@ -151,35 +195,8 @@ double rp_area_sampler_pdf(const rp_area_sampler *s, uint32_t face)
     return s->pdf[face];
 }
 
-/* Uniform point on triangle (a, b, c): barycentrics (1 - sqrt u1,
- * u2 sqrt u1) (Shirley 1992). */
-static rp_vec3 rp_triangle_sample(rp_vec3 a, rp_vec3 b, rp_vec3 c, double u1, double u2)
-{
-    double su = sqrt(u1);
-    double b1 = u2 * su;  /* weight of b */
-    double b2 = 1.0 - su; /* weight of a */
-    return rp_v3_add(rp_v3_scale(a, b2),
-                     rp_v3_add(rp_v3_scale(b, b1), rp_v3_scale(c, 1.0 - b1 - b2)));
-}
-
 rp_vec3 rp_face_sample_uniform(const rp_scene *scene, uint32_t face, double u1, double u2)
 {
     const rp_face *fc = &rp_scene_faces(scene)[face];
-    const rp_vec3 *v = rp_scene_vertices(scene);
-    rp_vec3 a = v[fc->v[0]], b = v[fc->v[1]], c = v[fc->v[2]];
-    if (fc->nverts == 3)
-        return rp_triangle_sample(a, b, c, u1, u2);
-
-    /* Convex quad: triangles (v0, v1, v2) and (v0, v2, v3), by area. */
-    rp_vec3 d = v[fc->v[3]];
-    rp_vec3 e = rp_v3_sub(c, a);
-    double a1 = rp_v3_length(rp_v3_cross(rp_v3_sub(b, a), e));
-    double a2 = rp_v3_length(rp_v3_cross(e, rp_v3_sub(d, a)));
-    double share = a1 / (a1 + a2);
-    if (u1 < share) {
-        u1 /= share;
-        return rp_triangle_sample(a, b, c, u1 < 1.0 ? u1 : 1.0, u2);
-    }
-    u1 = (u1 - share) / (1.0 - share);
-    return rp_triangle_sample(a, c, d, u1 < 1.0 ? u1 : 1.0, u2);
+    return face_point(scene, fc, quad_share(scene, fc), u1, u2);
 }
