@@ -18,6 +18,10 @@ static void print_usage(FILE *f)
           "  radpt probe SCENE --method M [method options] --surface-averages [--json]\n"
           "               [--seed S] [--threads T] [--time SECONDS]\n"
           "      area-averaged outgoing radiance of every surface, with standard errors\n"
+          "  radpt formfactor SCENE --from S --to S [--method analytic|montecarlo|hemicube]\n"
+          "               [--samples N] [--resolution R] [--rays N] [--tolerance T]\n"
+          "               [--elements N | --max-edge L] [--seed S] [--threads T] [--json]\n"
+          "      the form factor from surface S to surface S (area-weighted over elements)\n"
           "  radpt throughput SCENE [--spp N] [--rays N] [--threads T] [--json]\n"
           "      the random-ray limit of the ray caster, then the path tracer's rays/s,\n"
           "      paths/s and their fraction of that limit, in one run\n"
@@ -83,6 +87,8 @@ int main(int argc, char **argv)
         return rp_cmd_render(argc, argv);
     if (!strcmp(cmd, "probe"))
         return rp_cmd_probe(argc, argv);
+    if (!strcmp(cmd, "formfactor"))
+        return rp_cmd_formfactor(argc, argv);
     if (!strcmp(cmd, "throughput"))
         return rp_cmd_throughput(argc, argv);
     if (!strcmp(cmd, "samplers"))

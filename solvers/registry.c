@@ -5,9 +5,21 @@
 #include <string.h>
 
 extern const rp_solver_type rp_solver_pathtrace;
+extern const rp_solver_type rp_solver_jacobi;
+extern const rp_solver_type rp_solver_gauss_seidel;
+extern const rp_solver_type rp_solver_southwell;
+extern const rp_solver_type rp_solver_direct;
+extern const rp_solver_type rp_solver_stochastic_jacobi;
+extern const rp_solver_type rp_solver_hierarchical;
 
 static const rp_solver_type *const types[] = {
     &rp_solver_pathtrace,
+    &rp_solver_jacobi,
+    &rp_solver_gauss_seidel,
+    &rp_solver_southwell,
+    &rp_solver_direct,
+    &rp_solver_stochastic_jacobi,
+    &rp_solver_hierarchical,
     NULL
 };
 

@@ -34,7 +34,12 @@ typedef struct rp_ff_params {
     unsigned resolution;      /* hemicube: pixels along the top face */
     unsigned visibility_rays; /* analytic: rays for the visibility fraction */
     uint64_t seed;
+    double tolerance;         /* analytic: error goal per pair, relative to
+                                 max(F_ij, min(1, A_j / (pi d_ij^2)))
+                                 (0: RP_FF_DEFAULT_TOLERANCE) */
 } rp_ff_params;
+
+#define RP_FF_DEFAULT_TOLERANCE 1e-5
 
 /* Parses "analytic" | "montecarlo" | "hemicube". */
 rp_status rp_ff_method_parse(const char *name, rp_ff_method *out, rp_error *err);
@@ -47,13 +52,18 @@ typedef struct rp_ff_scratch rp_ff_scratch;
 rp_status rp_ff_context_create(const rp_scene *scene, const rp_mesh *mesh, const rp_raycast *rc,
                                const rp_ff_params *params, rp_ff_context **out, rp_error *err);
 void rp_ff_context_destroy(rp_ff_context *ctx);
+/* The parameters in use, defaults filled in (samples, resolution,
+ * tolerance). */
+void rp_ff_context_params(const rp_ff_context *ctx, rp_ff_params *out);
 
 rp_status rp_ff_scratch_create(const rp_ff_context *ctx, rp_ff_scratch **out, rp_error *err);
 void rp_ff_scratch_destroy(rp_ff_scratch *s);
 
 /* Form factors from element i to every element: row[j], j < nelements.
  * Deterministic for a given (params.seed, i).  *rays (may be NULL) gets the
- * visibility rays cast added to it. */
+ * visibility rays cast added to it (analytic: a pair's visibility is cast
+ * once and shared, so the count, not the row, depends on which rows ran
+ * before). */
 void rp_ff_row(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i, float *row, double *rays);
 
 /* One pair; *stderr_out (may be NULL) gets the Monte Carlo standard error

@@ -1,0 +1,373 @@
+/* radpt reference, radpt bench and radpt experiment: the benchmark front.
+ *
+ *   radpt reference SCENE [--spp N] [--samples N] [--seed S] [--cache DIR]
+ *                   [--threads T] [--force] [--json]
+ *   radpt bench SCENE [--methods LIST] [--budget SECONDS] -o DIR [--seeds N]
+ *               [--checkpoints N] [--target RMSE] [--surfaces] [--cache DIR]
+ *               [--reference-spp N] [--reference-samples N] [--seed S] [--threads T]
+ *   radpt experiment NAME [--quick] -o DIR [--budget SECONDS] [--seeds N]
+ *               [--cache DIR] [--scenes DIR] [--threads T]
+ *
+ * Progress and log lines go to stderr; the result's location to stdout. */
+#include <errno.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../geometry/scene.h"
+#include "cli.h"
+#include "experiments.h"
+#include "harness.h"
+#include "plot.h"
+#include "reference.h"
+
+#define BENCH_DEFAULT_METHODS "pathtrace,southwell:elements=250,southwell:elements=1000"
+#define BENCH_DEFAULT_BUDGET 10.0
+
+/* Log lines on stderr; a progress bar in between when stderr is a tty. */
+typedef struct front {
+    rp_progress bar;
+    int bar_open;
+} front;
+
+static void front_log(void *ctx, const char *msg)
+{
+    front *fr = ctx;
+    if (fr && fr->bar_open) {
+        rp_progress_end(&fr->bar);
+        fr->bar_open = 0;
+    }
+    fprintf(stderr, "%s\n", msg);
+}
+
+static void front_progress(void *ctx, double fraction, const char *detail)
+{
+    front *fr = ctx;
+    if (!fr->bar_open) {
+        rp_progress_begin(&fr->bar, "");
+        fr->bar_open = 1;
+    }
+    rp_progress_update(&fr->bar, fraction, detail);
+}
+
+static void front_done(front *fr)
+{
+    if (fr->bar_open)
+        rp_progress_end(&fr->bar);
+    fr->bar_open = 0;
+}
+
+/* Removes the flags rp_cli_parse cannot take (it gives every extra option
+ * a value) from argv; *found[i] is set for flags[i]. */
+static int strip_flags(int argc, char **argv, char **out, const char *const *flags, int *found)
+{
+    int n = 0;
+    for (int i = 0; i < argc; i++) {
+        int hit = 0;
+        for (int k = 0; flags[k]; k++)
+            if (i >= 2 && strcmp(argv[i], flags[k]) == 0) {
+                found[k] = 1;
+                hit = 1;
+            }
+        if (!hit)
+            out[n++] = argv[i];
+    }
+    out[n] = NULL;
+    return n;
+}
+
+static int seed_given(int argc, char **argv)
+{
+    for (int i = 2; i < argc; i++)
+        if (strcmp(argv[i], "--seed") == 0 || strncmp(argv[i], "--seed=", 7) == 0)
+            return 1;
+    return 0;
+}
+
+static int parse_ulong(const rp_cli *cli, const char *name, unsigned long lo, unsigned long hi, unsigned long *out)
+{
+    const char *v = rp_cli_extra(cli, name);
+    if (!v)
+        return 0;
+    char *end;
+    errno = 0;
+    unsigned long x = strtoul(v, &end, 10);
+    if (*v == '-' || end == v || *end || errno || x < lo || x > hi) {
+        fprintf(stderr, "radpt %s: --%s: '%s' is not a whole number in [%lu, %lu] (see radpt help)\n", cli->command,
+                name, v, lo, hi);
+        return 2;
+    }
+    *out = x;
+    return 0;
+}
+
+static int parse_positive(const rp_cli *cli, const char *name, double *out)
+{
+    const char *v = rp_cli_extra(cli, name);
+    if (!v)
+        return 0;
+    char *end;
+    double x = strtod(v, &end);
+    if (end == v || *end || !isfinite(x) || !(x > 0)) {
+        fprintf(stderr, "radpt %s: --%s: '%s' is not a positive number (see radpt help)\n", cli->command, name, v);
+        return 2;
+    }
+    *out = x;
+    return 0;
+}
+
+static void command_line(int argc, char **argv, char *buf, size_t n)
+{
+    size_t used = 0;
+    buf[0] = '\0';
+    for (int i = 0; i < argc && used < n; i++)
+        used += (size_t)snprintf(buf + used, n - used, "%s%s", i ? " " : "", i == 0 ? "radpt" : argv[i]);
+}
+
+/* ------------------------------------------------------------ reference */
+
+int rp_cmd_reference(int argc, char **argv)
+{
+    static const char *const extra[] = {"spp", "samples", "cache", NULL};
+    static const char *const flags[] = {"--force", NULL};
+    int found[1] = {0};
+    char **av = calloc((size_t)argc + 1, sizeof *av);
+    if (!av)
+        return 1;
+    int ac = strip_flags(argc, argv, av, flags, found);
+    rp_cli cli = {.command = "reference"};
+    int rc = rp_cli_parse(&cli, ac, av, extra, 0);
+    unsigned long spp = 0, samples = 0;
+    if (!rc)
+        rc = parse_ulong(&cli, "spp", 1, 1ul << 30, &spp);
+    if (!rc)
+        rc = parse_ulong(&cli, "samples", 1, 1ul << 40, &samples);
+    if (rc) {
+        free(av);
+        return rc;
+    }
+    front fr = {0};
+    rp_reference_params rp = {.size = sizeof rp, .spp = spp, .samples = samples,
+                              .seed = seed_given(ac, av) ? cli.seed : 0, .threads = cli.threads,
+                              .cache_dir = rp_cli_extra(&cli, "cache"), .force = found[0],
+                              .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr};
+    rp_error err;
+    rp_scene *scene = NULL;
+    rp_reference *ref = NULL;
+    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    if (st == RP_OK && rp.seed == 0 && seed_given(ac, av))
+        st = rp_error_set(&err, RP_ERR_INPUT, "--seed 0 is not allowed for a reference");
+    if (st == RP_OK)
+        st = rp_reference_get(scene, cli.scene, &rp, &ref, &err);
+    front_done(&fr);
+    if (st == RP_OK) {
+        const rp_surface *surf = rp_scene_surfaces(scene);
+        size_t nb = ref->nbands;
+        if (cli.json) {
+            printf("{\"scene\": ");
+            rp_json_string(stdout, cli.scene);
+            printf(", \"scene_hash\": \"%s\", \"options_hash\": \"%s\", \"kind\": \"%s\", \"cached\": %s, \"image\": ",
+                   ref->scene_hash, ref->options_hash, ref->kind == RP_REFERENCE_EXACT ? "exact" : "pathtrace",
+                   ref->cached ? "true" : "false");
+            rp_json_string(stdout, ref->exr_path);
+            printf(", \"json\": ");
+            rp_json_string(stdout, ref->json_path);
+            printf(", \"spp\": %lu, \"samples\": %lu, \"seed\": %" PRIu64 ", \"seconds\": %.3f, \"rmse_stderr\": ",
+                   ref->spp, ref->samples, ref->seed, ref->seconds);
+            if (isfinite(ref->rmse_se))
+                printf("%.6g", ref->rmse_se);
+            else
+                printf("null");
+            printf(", \"measured_pixels\": %zu, \"surfaces\": [", ref->mask_count);
+            for (size_t s = 0; s < ref->nsurfaces; s++) {
+                printf("%s{\"name\": ", s ? ", " : "");
+                rp_json_string(stdout, surf[s].name);
+                printf(", \"radiance\": [");
+                for (size_t b = 0; b < nb; b++)
+                    printf("%s%.10g", b ? ", " : "", ref->surface_radiance[s * nb + b]);
+                printf("], \"stderr\": [");
+                for (size_t b = 0; b < nb; b++)
+                    printf("%s%.4g", b ? ", " : "", ref->surface_stderr[s * nb + b]);
+                printf("]}");
+            }
+            printf("]}\n");
+        } else {
+            if (ref->kind == RP_REFERENCE_EXACT)
+                printf("reference %s: exact (furnace, L = Le / (1 - rho) = %.10g in band 0)%s\n", ref->exr_path,
+                       ref->exact_L[0], ref->cached ? ", cached" : "");
+            else
+                printf("reference %s: pathtrace, sobol, %lu spp, %lu samples per surface, seed %" PRIu64
+                       ", %.1f s%s; RMSE standard error %.3g\n",
+                       ref->exr_path, ref->spp, ref->samples, ref->seed, ref->seconds,
+                       ref->cached ? ", cached" : "", ref->rmse_se);
+            printf("parameters and surface averages: %s\n", ref->json_path);
+            printf("%-20s  radiance per band +- standard error\n", "surface");
+            for (size_t s = 0; s < ref->nsurfaces; s++) {
+                printf("%-20s ", surf[s].name);
+                for (size_t b = 0; b < nb; b++)
+                    printf(" %.6g +- %.2g", ref->surface_radiance[s * nb + b], ref->surface_stderr[s * nb + b]);
+                printf("\n");
+            }
+        }
+    }
+    rp_reference_destroy(ref);
+    rp_scene_destroy(scene);
+    free(av);
+    return st == RP_OK ? 0 : rp_cli_fail(st, &err);
+}
+
+/* ---------------------------------------------------------------- bench */
+
+int rp_cmd_bench(int argc, char **argv)
+{
+    static const char *const extra[] = {"methods", "budget", "seeds", "checkpoints", "target", "cache",
+                                        "reference-spp", "reference-samples", NULL};
+    static const char *const flags[] = {"--surfaces", NULL};
+    int found[1] = {0};
+    char **av = calloc((size_t)argc + 1, sizeof *av);
+    if (!av)
+        return 1;
+    int ac = strip_flags(argc, argv, av, flags, found);
+    rp_cli cli = {.command = "bench"};
+    int rc = rp_cli_parse(&cli, ac, av, extra, 0);
+    unsigned long seeds = 3, levels = 9, ref_spp = 0, ref_samples = 0;
+    double budget = BENCH_DEFAULT_BUDGET, target = 0;
+    if (!rc)
+        rc = parse_ulong(&cli, "seeds", 1, 1000, &seeds);
+    if (!rc)
+        rc = parse_ulong(&cli, "checkpoints", 1, 40, &levels);
+    if (!rc)
+        rc = parse_ulong(&cli, "reference-spp", 1, 1ul << 30, &ref_spp);
+    if (!rc)
+        rc = parse_ulong(&cli, "reference-samples", 1, 1ul << 40, &ref_samples);
+    if (!rc)
+        rc = parse_positive(&cli, "budget", &budget);
+    if (!rc)
+        rc = parse_positive(&cli, "target", &target);
+    if (!rc && cli.time_budget > 0)
+        budget = cli.time_budget; /* --time works as --budget */
+    if (!rc && !cli.out) {
+        fprintf(stderr, "radpt bench: needs -o DIR (see radpt help)\n");
+        rc = 2;
+    }
+    if (!rc && cli.seed == 0) {
+        fprintf(stderr, "radpt bench: --seed must be at least 1 (see radpt help)\n");
+        rc = 2;
+    }
+    if (rc) {
+        free(av);
+        return rc;
+    }
+    const char *list = rp_cli_extra(&cli, "methods");
+    if (!list)
+        list = BENCH_DEFAULT_METHODS;
+    rp_error err;
+    rp_method_spec *methods = NULL;
+    size_t nmethods = 0;
+    rp_status st = rp_method_list_parse(list, &methods, &nmethods, &err);
+    if (st != RP_OK) {
+        fprintf(stderr, "radpt bench: --methods: %s\n", err.message);
+        free(av);
+        return 2;
+    }
+    front fr = {0};
+    rp_scene *scene = NULL;
+    rp_reference *ref = NULL;
+    rp_bench *bench = NULL;
+    st = rp_scene_load(cli.scene, &scene, &err);
+    if (st == RP_OK) {
+        rp_reference_params rp = {.size = sizeof rp, .spp = ref_spp, .samples = ref_samples,
+                                  .threads = cli.threads, .cache_dir = rp_cli_extra(&cli, "cache"),
+                                  .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr};
+        st = rp_reference_get(scene, cli.scene, &rp, &ref, &err);
+        front_done(&fr);
+    }
+    if (st == RP_OK) {
+        rp_bench_params bp = {.size = sizeof bp, .nseeds = (unsigned)seeds, .seed = cli.seed, .target = target,
+                              .log = front_log, .log_ctx = &fr};
+        bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = (unsigned)levels,
+                                     .schedule = RP_SCHEDULE_TIME, .threads = cli.threads,
+                                     .surfaces_for_mc = found[0], .keep_image = 1,
+                                     .progress = front_progress, .progress_ctx = &fr};
+        st = rp_bench_run(scene, cli.scene, ref, methods, nmethods, &bp, &bench, &err);
+        front_done(&fr);
+    }
+    if (st == RP_OK) {
+        char cmd[2048], note[256];
+        command_line(argc, argv, cmd, sizeof cmd);
+        rp_bench_output out = {.size = sizeof out, .sheet = 1, .command = cmd};
+        st = rp_bench_write(bench, cli.out, &out, note, &err);
+        if (st == RP_OK) {
+            if (note[0])
+                fprintf(stderr, "radpt bench: %s\n", note);
+            printf("report: %s/report.md (runs.csv, summary.json and charts in %s)\n", cli.out, cli.out);
+            if (bench->failures)
+                st = rp_error_set(&err, RP_ERR_RUNTIME, "%zu run(s) failed; see %s/report.md", bench->failures,
+                                  cli.out);
+        }
+    }
+    rp_bench_destroy(bench);
+    rp_reference_destroy(ref);
+    rp_scene_destroy(scene);
+    free(methods);
+    free(av);
+    return st == RP_OK ? 0 : rp_cli_fail(st, &err);
+}
+
+/* ----------------------------------------------------------- experiment */
+
+int rp_cmd_experiment(int argc, char **argv)
+{
+    static const char *const extra[] = {"budget", "seeds", "cache", "scenes", NULL};
+    static const char *const flags[] = {"--quick", NULL};
+    int found[1] = {0};
+    char **av = calloc((size_t)argc + 1, sizeof *av);
+    if (!av)
+        return 1;
+    int ac = strip_flags(argc, argv, av, flags, found);
+    rp_cli cli = {.command = "experiment"};
+    int rc = rp_cli_parse(&cli, ac, av, extra, 0);
+    unsigned long seeds = 0;
+    double budget = 0;
+    if (!rc)
+        rc = parse_ulong(&cli, "seeds", 1, 1000, &seeds);
+    if (!rc)
+        rc = parse_positive(&cli, "budget", &budget);
+    const rp_experiment *e = NULL;
+    if (!rc) {
+        e = rp_experiment_lookup(cli.scene);
+        if (!e) {
+            fprintf(stderr, "radpt experiment: unknown experiment '%s'; known:", cli.scene);
+            for (const rp_experiment *const *k = rp_experiments(); *k; k++)
+                fprintf(stderr, " %s", (*k)->name);
+            fprintf(stderr, "\n");
+            rc = 2;
+        }
+    }
+    if (!rc && !cli.out) {
+        fprintf(stderr, "radpt experiment: needs -o DIR (see radpt help)\n");
+        rc = 2;
+    }
+    if (rc) {
+        free(av);
+        return rc;
+    }
+    char cmd[2048];
+    command_line(argc, argv, cmd, sizeof cmd);
+    front fr = {0};
+    rp_experiment_params p = {.size = sizeof p, .quick = found[0], .out_dir = cli.out,
+                              .cache_dir = rp_cli_extra(&cli, "cache"), .scenes_dir = rp_cli_extra(&cli, "scenes"),
+                              .threads = cli.threads, .budget = budget, .nseeds = (unsigned)seeds, .command = cmd,
+                              .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr};
+    rp_error err;
+    rp_error_clear(&err);
+    fprintf(stderr, "experiment %s%s: %s\n", e->name, p.quick ? " (quick)" : "", e->summary);
+    rp_status st = e->run(&p, &err);
+    front_done(&fr);
+    if (st == RP_OK)
+        printf("report: %s/report.md\n", cli.out);
+    free(av);
+    return st == RP_OK ? 0 : rp_cli_fail(st, &err);
+}

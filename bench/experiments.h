@@ -1,0 +1,49 @@
+/* Named experiments (radpt experiment NAME): each builds its scenes (from
+ * scenes/ or as text in memory), runs methods through the harness or the
+ * form-factor module, and writes its CSV, charts and report.md into a
+ * directory.  Default sizes take a few minutes; quick ones well under a
+ * minute (for CI). */
+#ifndef RP_EXPERIMENTS_H
+#define RP_EXPERIMENTS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../geometry/status.h"
+#include "../solvers/solver.h"
+#include "reference.h"
+
+typedef struct rp_experiment_params {
+    size_t size;               /* sizeof(rp_experiment_params) */
+    int quick;
+    const char *out_dir;
+    const char *cache_dir;     /* references (NULL: "refs") */
+    const char *scenes_dir;    /* NULL: ./scenes, else next to the binary */
+    int threads;
+    double budget;             /* seconds per run; 0: the experiment's default */
+    unsigned nseeds;           /* 0: the experiment's default */
+    const char *command;       /* the command line, for the report */
+    rp_log_fn log;
+    void *log_ctx;
+    rp_progress_fn progress;
+    void *progress_ctx;
+} rp_experiment_params;
+
+typedef struct rp_experiment {
+    const char *name;
+    const char *summary;
+    /* RP_ERR_UNSUPPORTED: the experiment cannot run here (e.g. its method
+     * is not registered). */
+    rp_status (*run)(const rp_experiment_params *p, rp_error *err);
+} rp_experiment;
+
+/* NULL-terminated list, and look-up by name. */
+const rp_experiment *const *rp_experiments(void);
+const rp_experiment *rp_experiment_lookup(const char *name);
+
+/* Finds scenes/NAME: under p->scenes_dir if set, else ./scenes, else the
+ * scenes directory next to the running binary. */
+rp_status rp_experiment_scene_path(const rp_experiment_params *p, const char *name, char *out, size_t n,
+                                   rp_error *err);
+
+#endif

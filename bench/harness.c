@@ -1,0 +1,558 @@
+/* The benchmark harness (harness.h). */
+#include "harness.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <time.h>
+
+#include "cli.h"
+
+/* ------------------------------------------------------------- specs */
+
+rp_status rp_method_spec_parse(const char *text, rp_method_spec *m, rp_error *err)
+{
+    memset(m, 0, sizeof *m);
+    size_t len = strlen(text);
+    if (len == 0)
+        return rp_error_set(err, RP_ERR_INPUT, "empty method spec");
+    if (len >= sizeof m->text)
+        return rp_error_set(err, RP_ERR_INPUT, "method spec '%.40s...' is too long", text);
+    memcpy(m->text, text, len + 1);
+    memcpy(m->buf, text, len + 1);
+    char *p = m->buf, *colon = strchr(p, ':');
+    if (colon)
+        *colon = '\0';
+    if (strlen(p) >= sizeof m->name || !*p)
+        return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': bad method name", text);
+    strcpy(m->name, p);
+    m->type = rp_solver_lookup(m->name);
+    if (!m->type) {
+        char known[512] = "";
+        size_t used = 0;
+        for (const rp_solver_type *const *t = rp_solver_types(); *t && used < sizeof known; t++)
+            used += (size_t)snprintf(known + used, sizeof known - used, " %s", (*t)->name);
+        return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': unknown method '%s'; known methods:%s", text,
+                            m->name, known);
+    }
+    while (colon) {
+        p = colon + 1;
+        colon = strchr(p, ':');
+        if (colon)
+            *colon = '\0';
+        if (!*p)
+            return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': empty option", text);
+        if (m->count == RP_SPEC_MAX_OPTIONS)
+            return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': too many options", text);
+        char *eq = strchr(p, '=');
+        const rp_option_spec *spec = NULL;
+        if (eq)
+            *eq = '\0';
+        for (const rp_option_spec *o = m->type->options; o && o->name; o++)
+            if (strcmp(o->name, p) == 0)
+                spec = o;
+        if (!spec)
+            return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': method %s has no option '%s' (see radpt help %s)",
+                                text, m->name, p, m->name);
+        if (!eq && spec->arg)
+            return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': option '%s' needs a value (%s=%s)", text, p, p,
+                                spec->arg);
+        if (eq && !spec->arg)
+            return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': option '%s' is a flag and takes no value", text,
+                                p);
+        m->keys[m->count] = spec->name;
+        m->values[m->count++] = eq ? eq + 1 : "1";
+    }
+    return RP_OK;
+}
+
+rp_status rp_method_list_parse(const char *list, rp_method_spec **out, size_t *n, rp_error *err)
+{
+    *out = NULL;
+    *n = 0;
+    size_t cap = 1;
+    for (const char *c = list; *c; c++)
+        cap += *c == ',';
+    rp_method_spec *m = calloc(cap, sizeof *m);
+    char *copy = strdup(list);
+    if (!m || !copy) {
+        free(m);
+        free(copy);
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    }
+    size_t k = 0;
+    rp_status st = RP_OK;
+    char *save = NULL;
+    for (char *tok = strtok_r(copy, ",", &save); tok && st == RP_OK; tok = strtok_r(NULL, ",", &save)) {
+        while (*tok == ' ')
+            tok++;
+        st = rp_method_spec_parse(tok, &m[k], err);
+        /* keys/values point into the spec's own buffer: fix them after the copy */
+        k += st == RP_OK;
+    }
+    free(copy);
+    if (st == RP_OK && k == 0)
+        st = rp_error_set(err, RP_ERR_INPUT, "no methods in '%s'", list);
+    if (st != RP_OK) {
+        free(m);
+        return st;
+    }
+    *out = m;
+    *n = k;
+    return RP_OK;
+}
+
+const char *rp_method_spec_get(const rp_method_spec *m, const char *key)
+{
+    const char *v = NULL;
+    for (size_t i = 0; i < m->count; i++)
+        if (strcmp(m->keys[i], key) == 0)
+            v = m->values[i];
+    return v;
+}
+
+int rp_method_is_monte_carlo(const rp_method_spec *m)
+{
+    return strcmp(m->name, "pathtrace") == 0 || strncmp(m->name, "stochastic", 10) == 0;
+}
+
+/* A spec copied by value keeps pointers into the original's buffer;
+ * re-point them at the copy's own. */
+static void spec_copy(rp_method_spec *dst, const rp_method_spec *src)
+{
+    *dst = *src;
+    for (size_t i = 0; i < src->count; i++) {
+        if (src->values[i] >= src->buf && src->values[i] < src->buf + sizeof src->buf)
+            dst->values[i] = dst->buf + (src->values[i] - src->buf);
+    }
+}
+
+/* ------------------------------------------------------------ clocks */
+
+double rp_cpu_clock(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int hwm_reset_ok = -1;
+
+void rp_peak_rss_reset(void)
+{
+    FILE *f = fopen("/proc/self/clear_refs", "w");
+    int ok = 0;
+    if (f) {
+        ok = fputs("5", f) >= 0;
+        ok = (fclose(f) == 0) && ok;
+    }
+    hwm_reset_ok = ok;
+}
+
+double rp_peak_rss_mb(void)
+{
+    if (hwm_reset_ok == 1) {
+        FILE *f = fopen("/proc/self/status", "r");
+        char line[256];
+        double kb = -1;
+        while (f && fgets(line, sizeof line, f))
+            if (strncmp(line, "VmHWM:", 6) == 0)
+                kb = strtod(line + 6, NULL);
+        if (f)
+            fclose(f);
+        if (kb >= 0)
+            return kb / 1024.0;
+    }
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    return (double)ru.ru_maxrss / 1024.0; /* Linux: kilobytes */
+}
+
+/* --------------------------------------------------------------- run */
+
+void rp_trial_free(rp_trial *run)
+{
+    if (!run)
+        return;
+    free(run->cp);
+    free(run->image);
+    free(run->surfaces);
+    run->cp = NULL;
+    run->image = NULL;
+    run->surfaces = NULL;
+    run->ncp = 0;
+}
+
+typedef struct run_ctx {
+    const rp_scene *scene;
+    const rp_reference *ref;
+    rp_solver *solver;
+    unsigned want;
+    float *image;
+    double *surf, *surf_se;
+    size_t npix, nb, ns;
+} run_ctx;
+
+static rp_status measure(run_ctx *c, rp_checkpoint *cp, rp_error *err)
+{
+    double t0 = rp_clock();
+    rp_estimate e = {.radiance = (c->want & RP_WANT_IMAGE) ? c->image : NULL,
+                     .surface_radiance = (c->want & RP_WANT_SURFACES) ? c->surf : NULL,
+                     .surface_stderr = (c->want & RP_WANT_SURFACES) ? c->surf_se : NULL};
+    rp_status st = rp_solver_estimate(c->solver, &e, err);
+    if (st != RP_OK)
+        return st;
+    cp->samples = e.samples;
+    cp->rmse = cp->relmse = cp->mae = cp->surface_err = cp->rmse_debiased = NAN;
+    const rp_reference *r = c->ref;
+    if (e.radiance && r->radiance) {
+        for (size_t i = 0; i < c->npix * c->nb; i++)
+            if (!isfinite(c->image[i]))
+                return rp_error_set(err, RP_ERR_RUNTIME, "non-finite radiance at pixel %zu", i / c->nb);
+        rp_image_metrics im;
+        rp_metrics_image(c->image, r->radiance, r->mask, c->npix, c->nb, &im);
+        cp->rmse = im.rmse;
+        cp->relmse = im.relmse;
+        cp->mae = im.mae;
+        double d = im.rmse * im.rmse - r->rmse_se * r->rmse_se;
+        cp->rmse_debiased = isfinite(r->rmse_se) ? sqrt(d > 0 ? d : 0) : NAN;
+    }
+    if (e.surface_radiance)
+        cp->surface_err = rp_metrics_surface_error(c->surf, r->surface_radiance, r->surface_mask, c->ns, c->nb, NULL);
+    /* The reference's own error should be well below the error measured:
+     * flag it when its standard error exceeds a third of it. */
+    cp->ref_flag = (isfinite(cp->rmse) && r->rmse_se > cp->rmse / 3) ||
+                   (isfinite(cp->surface_err) && r->surface_rel_se > cp->surface_err / 3);
+    cp->measure_s = rp_clock() - t0;
+    return RP_OK;
+}
+
+rp_status rp_harness_run(const rp_scene *scene, const rp_reference *ref, const rp_method_spec *m,
+                         uint64_t seed, const rp_harness_params *hp, rp_trial *run, rp_error *err)
+{
+    memset(run, 0, sizeof *run);
+    run->seed = seed;
+    const unsigned levels = hp->levels ? hp->levels : 9;
+    const double budget = hp->budget;
+    run_ctx c = {.scene = scene, .ref = ref, .nb = rp_scene_nbands(scene), .ns = rp_scene_nsurfaces(scene)};
+    const rp_camera *cam = rp_scene_camera(scene);
+    c.npix = cam && ref->radiance ? (size_t)cam->width * cam->height : 0;
+    int mc_pathtrace = strcmp(m->name, "pathtrace") == 0;
+    c.want = (c.npix ? RP_WANT_IMAGE : 0) | (!mc_pathtrace || hp->surfaces_for_mc || !c.npix ? RP_WANT_SURFACES : 0);
+    run->cp = calloc(levels + 1, sizeof *run->cp);
+    c.image = c.npix ? malloc(c.npix * c.nb * sizeof *c.image) : NULL;
+    c.surf = calloc(c.ns * c.nb + 1, sizeof *c.surf);
+    c.surf_se = calloc(c.ns * c.nb + 1, sizeof *c.surf_se);
+    if (!run->cp || (c.npix && !c.image) || !c.surf || !c.surf_se) {
+        free(c.image);
+        free(c.surf);
+        free(c.surf_se);
+        rp_trial_free(run);
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    }
+
+    rp_options o = {.size = sizeof o, .want = c.want, .seed = seed, .threads = hp->threads,
+                    .keys = m->keys, .values = m->values, .count = m->count, .open_ended = 1};
+    rp_error rerr;
+    rp_error_clear(&rerr);
+    rp_peak_rss_reset();
+    double wall = 0, cpu = 0, t0 = rp_clock(), c0 = rp_cpu_clock();
+    rp_status st = rp_solver_create(m->type, scene, &o, &c.solver, &rerr);
+    wall += rp_clock() - t0;
+    cpu += rp_cpu_clock() - c0;
+
+    rp_step_info sum = {0}, last = {0};
+    double steps = 0;
+    int k = (int)levels - 1;
+    while (st == RP_OK && k >= 0) {
+        rp_step_info info;
+        memset(&info, 0, sizeof info);
+        t0 = rp_clock();
+        c0 = rp_cpu_clock();
+        st = rp_solver_step(c.solver, &info, &rerr);
+        wall += rp_clock() - t0;
+        cpu += rp_cpu_clock() - c0;
+        if (st != RP_OK)
+            break;
+        steps++;
+        sum.rays += info.rays;
+        sum.paths += info.paths;
+        sum.form_factors += info.form_factors;
+        sum.iterations += info.iterations;
+        last = info;
+        double clock = hp->schedule == RP_SCHEDULE_ITERATIONS ? sum.iterations : wall;
+        int done = clock >= budget || (hp->stop_when_converged && info.converged);
+        if (hp->progress) {
+            char detail[160];
+            snprintf(detail, sizeof detail, "%.80s seed %llu: %.3g s, %.0f iterations", m->text,
+                     (unsigned long long)seed, wall, sum.iterations);
+            hp->progress(hp->progress_ctx, clock / budget, detail);
+        }
+        double target = ldexp(budget, -k);
+        if (!(clock >= target) && !done)
+            continue;
+        /* the last threshold this step passed */
+        while (k > 0 && clock >= ldexp(budget, -(k - 1)))
+            k--;
+        rp_checkpoint *cp = &run->cp[run->ncp];
+        cp->index = k;
+        cp->target = ldexp(budget, -k);
+        cp->wall_s = wall;
+        cp->cpu_s = cpu;
+        cp->steps = steps;
+        cp->rays = sum.rays;
+        cp->paths = sum.paths;
+        cp->iterations = sum.iterations;
+        cp->form_factors = sum.form_factors;
+        cp->residual = last.residual;
+        cp->unshot = last.unshot;
+        cp->converged = last.converged;
+        cp->peak_rss_mb = rp_peak_rss_mb();
+        cp->solver_mb = last.memory / (1024.0 * 1024.0);
+        st = measure(&c, cp, &rerr);
+        if (st != RP_OK)
+            break;
+        run->ncp++;
+        k--;
+        if (done)
+            break;
+    }
+    if (run->ncp)
+        run->cp[run->ncp - 1].final = 1;
+    if (st == RP_OK && hp->keep_image && c.image) {
+        run->image = c.image;
+        c.image = NULL;
+    }
+    if (st == RP_OK && (c.want & RP_WANT_SURFACES)) {
+        run->surfaces = c.surf;
+        c.surf = NULL;
+    }
+    run->status = st;
+    if (st != RP_OK)
+        snprintf(run->error, sizeof run->error, "%s", rerr.message[0] ? rerr.message : rp_status_string(st));
+    rp_solver_destroy(c.solver);
+    free(c.image);
+    free(c.surf);
+    free(c.surf_se);
+    return RP_OK;
+}
+
+/* ------------------------------------------------------------- bench */
+
+void rp_bench_destroy(rp_bench *b)
+{
+    if (!b)
+        return;
+    for (size_t i = 0; i < b->nruns; i++)
+        rp_trial_free(&b->runs[i]);
+    for (size_t i = 0; b->summary && i < b->nmethods; i++)
+        free(b->summary[i].pts);
+    free(b->summary);
+    free(b->runs);
+    free(b->methods);
+    free(b);
+}
+
+static void agg_rows(const rp_checkpoint *const *rows, size_t n, rp_agg *a)
+{
+    memset(a, 0, sizeof *a);
+    a->n = n;
+    double *v = calloc(n ? n : 1, sizeof *v);
+    if (!v)
+        return;
+#define AGG(field, mean, sd)                                                                       \
+    do {                                                                                           \
+        double sd_;                                                                                \
+        for (size_t i = 0; i < n; i++)                                                             \
+            v[i] = rows[i]->field;                                                                 \
+        rp_metrics_mean_sd(v, n, &a->mean, &sd_, NULL);                                            \
+        sd;                                                                                        \
+    } while (0)
+    AGG(wall_s, wall_s, a->wall_sd = sd_);
+    AGG(cpu_s, cpu_s, (void)sd_);
+    AGG(samples, samples, (void)sd_);
+    AGG(iterations, iterations, (void)sd_);
+    AGG(rays, rays, (void)sd_);
+    AGG(form_factors, form_factors, (void)sd_);
+    AGG(peak_rss_mb, peak_rss_mb, (void)sd_);
+    AGG(rmse, rmse, a->rmse_sd = sd_);
+    AGG(relmse, relmse, a->relmse_sd = sd_);
+    AGG(mae, mae, a->mae_sd = sd_);
+    AGG(surface_err, surface_err, a->surface_err_sd = sd_);
+    AGG(rmse_debiased, rmse_debiased, a->rmse_debiased_sd = sd_);
+#undef AGG
+    a->work = a->rays + a->form_factors;
+    for (size_t i = 0; i < n; i++)
+        a->ref_flag |= rows[i]->ref_flag;
+    a->index = n ? rows[0]->index : 0;
+    free(v);
+}
+
+void rp_bench_summarise(rp_bench *b)
+{
+    size_t levels = b->params.run.levels ? b->params.run.levels : 9;
+    for (size_t mi = 0; mi < b->nmethods; mi++) {
+        rp_method_summary *s = &b->summary[mi];
+        free(s->pts);
+        memset(s, 0, sizeof *s);
+        size_t total = 0;
+        for (size_t r = 0; r < b->nruns; r++)
+            if (b->runs[r].method == mi) {
+                s->runs++;
+                s->runs_ok += b->runs[r].status == RP_OK;
+                total += b->runs[r].ncp;
+            }
+        const rp_checkpoint **rows = malloc((total + 1) * sizeof *rows);
+        double *x = malloc((total + 1) * sizeof *x), *xw = malloc((total + 1) * sizeof *xw),
+               *xs = malloc((total + 1) * sizeof *xs), *y = malloc((total + 1) * sizeof *y);
+        s->pts = calloc(levels + 1, sizeof *s->pts);
+        if (!rows || !x || !xw || !xs || !y || !s->pts) {
+            free(rows);
+            free(x);
+            free(xw);
+            free(xs);
+            free(y);
+            continue;
+        }
+        /* every row, for the fits */
+        size_t n = 0;
+        for (size_t r = 0; r < b->nruns; r++)
+            if (b->runs[r].method == mi)
+                for (size_t i = 0; i < b->runs[r].ncp; i++) {
+                    const rp_checkpoint *cp = &b->runs[r].cp[i];
+                    x[n] = cp->wall_s;
+                    xw[n] = cp->rays + cp->form_factors;
+                    xs[n] = cp->samples;
+                    y[n++] = cp->rmse_debiased;
+                }
+        rp_fit_loglog(x, y, n, 0.95, &s->fit_time);
+        rp_fit_loglog(xw, y, n, 0.95, &s->fit_work);
+        rp_fit_loglog(xs, y, n, 0.95, &s->fit_samples);
+        /* per checkpoint index, by increasing time */
+        for (int k = (int)levels - 1; k >= 0; k--) {
+            size_t m = 0;
+            for (size_t r = 0; r < b->nruns; r++)
+                if (b->runs[r].method == mi)
+                    for (size_t i = 0; i < b->runs[r].ncp; i++)
+                        if (b->runs[r].cp[i].index == k)
+                            rows[m++] = &b->runs[r].cp[i];
+            if (m)
+                agg_rows(rows, m, &s->pts[s->npts++]);
+        }
+        size_t m = 0;
+        for (size_t r = 0; r < b->nruns; r++)
+            if (b->runs[r].method == mi && b->runs[r].ncp)
+                rows[m++] = &b->runs[r].cp[b->runs[r].ncp - 1];
+        agg_rows(rows, m, &s->final);
+        free(rows);
+        free(x);
+        free(xw);
+        free(xs);
+        free(y);
+    }
+    /* The target RMSE: given, or the geometric mean of the best and the
+     * worst final RMSE (twice the final RMSE with one method), so that some
+     * methods reach it and some do not. */
+    double lo = INFINITY, hi = 0;
+    for (size_t mi = 0; mi < b->nmethods; mi++) {
+        double e = b->summary[mi].final.rmse_debiased;
+        if (isfinite(e) && e > 0) {
+            lo = e < lo ? e : lo;
+            hi = e > hi ? e : hi;
+        }
+    }
+    b->target_auto = !(b->params.target > 0);
+    b->target = !b->target_auto ? b->params.target : (hi > 0 ? (lo < hi ? sqrt(lo * hi) : 2 * hi) : NAN);
+    for (size_t mi = 0; mi < b->nmethods; mi++) {
+        rp_method_summary *s = &b->summary[mi];
+        double *t = malloc((s->npts + 1) * sizeof *t), *e = malloc((s->npts + 1) * sizeof *e);
+        s->time_to_target = NAN;
+        if (t && e && isfinite(b->target)) {
+            for (size_t i = 0; i < s->npts; i++) {
+                t[i] = s->pts[i].wall_s;
+                e[i] = s->pts[i].rmse_debiased;
+            }
+            s->time_to_target = rp_metrics_time_to_error(t, e, s->npts, b->target, &s->target_before);
+        }
+        free(t);
+        free(e);
+    }
+}
+
+rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_reference *ref,
+                       const rp_method_spec *methods, size_t nmethods, const rp_bench_params *params,
+                       rp_bench **out, rp_error *err)
+{
+    *out = NULL;
+    rp_bench *b = calloc(1, sizeof *b);
+    if (!b)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    b->params = *params;
+    if (!b->params.nseeds)
+        b->params.nseeds = 3;
+    if (!b->params.seed)
+        b->params.seed = 1;
+    if (!b->params.run.levels)
+        b->params.run.levels = 9;
+    b->scene = scene;
+    b->scene_name = scene_name;
+    rp_scene_hash(scene, b->scene_hash);
+    b->ref = ref;
+    b->nmethods = nmethods;
+    b->methods = calloc(nmethods ? nmethods : 1, sizeof *b->methods);
+    b->summary = calloc(nmethods ? nmethods : 1, sizeof *b->summary);
+    size_t nruns = 0;
+    for (size_t i = 0; i < nmethods; i++)
+        nruns += rp_method_is_monte_carlo(&methods[i]) ? b->params.nseeds : 1;
+    b->runs = calloc(nruns ? nruns : 1, sizeof *b->runs);
+    if (!b->methods || !b->summary || !b->runs) {
+        rp_bench_destroy(b);
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    }
+    for (size_t i = 0; i < nmethods; i++)
+        spec_copy(&b->methods[i], &methods[i]);
+    for (size_t i = 0; i < nmethods; i++) {
+        unsigned ns = rp_method_is_monte_carlo(&b->methods[i]) ? b->params.nseeds : 1;
+        for (unsigned s = 0; s < ns; s++) {
+            rp_trial *run = &b->runs[b->nruns];
+            uint64_t seed = b->params.seed + s;
+            if (b->params.log) {
+                char msg[400];
+                snprintf(msg, sizeof msg, "running %s, seed %llu, budget %g %s", b->methods[i].text,
+                         (unsigned long long)seed, b->params.run.budget,
+                         b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s");
+                b->params.log(b->params.log_ctx, msg);
+            }
+            rp_harness_params hp = b->params.run;
+            /* the image sheet shows the first seed */
+            hp.keep_image = hp.keep_image && s == 0;
+            rp_status st = rp_harness_run(scene, ref, &b->methods[i], seed, &hp, run, err);
+            if (st != RP_OK) {
+                rp_bench_destroy(b);
+                return st;
+            }
+            run->method = i;
+            b->nruns++;
+            if (run->status != RP_OK) {
+                b->failures++;
+                if (b->params.log) {
+                    char msg[1300];
+                    snprintf(msg, sizeof msg, "%s seed %llu failed: %s", b->methods[i].text,
+                             (unsigned long long)seed, run->error);
+                    b->params.log(b->params.log_ctx, msg);
+                }
+            } else if (b->params.log && run->ncp) {
+                const rp_checkpoint *cp = &run->cp[run->ncp - 1];
+                char msg[400];
+                snprintf(msg, sizeof msg, "  %s seed %llu: %.3g s, RMSE %.4g, surface error %.4g", b->methods[i].text,
+                         (unsigned long long)seed, cp->wall_s, cp->rmse, cp->surface_err);
+                b->params.log(b->params.log_ctx, msg);
+            }
+        }
+    }
+    rp_bench_summarise(b);
+    *out = b;
+    return RP_OK;
+}

@@ -1,0 +1,438 @@
+/* Hierarchical radiosity: answers in the common space (solver.h) from the
+ * leaves of the quadtrees.
+ *
+ * Surface averages are the area-weighted leaf radiosities over pi.
+ *
+ * Images are filtered as the path tracer's and the uniform solvers': spp
+ * camera rays per pixel through the shared pinhole camera (camera.h), box
+ * filter, stratified jitter that is a pure function of (seed, pixel,
+ * sample).  A ray hitting the front of a face sees L = B / pi, with B
+ *
+ *   flat     the leaf's own value;
+ *   gouraud  interpolated from values at the leaves' corners (Cohen &
+ *            Wallace 1993, sec. 9.2): at an ordinary vertex the
+ *            area-weighted mean of the leaves (of the same surface) that
+ *            have it as a corner; at a T-vertex (one lying inside an edge of
+ *            a coarser neighbouring leaf) the value is anchored, i.e.
+ *            interpolated along that coarser edge (Baum, Mann, Smith &
+ *            Winget 1991), so both sides of the edge interpolate the same
+ *            line and the image has no shading cracks;
+ *   gather   one bounce of final gathering (Reichert 1992): L = Le +
+ *            rho/pi E(x), the irradiance E from cosine-distributed rays that
+ *            each see the flat value of the leaf they hit.
+ *
+ * The backs of faces and misses are black. */
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../geometry/camera.h"
+#include "hier_internal.h"
+
+void hier_surfaces(const hier_state *s, double *out)
+{
+    const size_t nb = s->nb, ns = rp_scene_nsurfaces(s->scene);
+    double *area = calloc(ns ? ns : 1, sizeof *area);
+    memset(out, 0, ns * nb * sizeof *out);
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        if (nd->child != RP_NONE)
+            continue;
+        uint32_t sf = s->faces[nd->face].surface;
+        if (area)
+            area[sf] += nd->area;
+        for (size_t b = 0; b < nb; b++)
+            out[sf * nb + b] += nd->area * s->B[i * nb + b];
+    }
+    const rp_surface *surf = rp_scene_surfaces(s->scene);
+    for (size_t k = 0; k < ns; k++) {
+        /* Leaf areas add up to the surface's (up to rounding). */
+        double a = area ? area[k] : surf[k].area;
+        for (size_t b = 0; b < nb; b++)
+            out[k * nb + b] = a > 0 ? out[k * nb + b] / (a * RP_PI) : 0;
+    }
+    free(area);
+}
+
+/* ---- vertices of the leaves, shared ones found by exact look-up ---- */
+
+typedef struct vtx_table {
+    size_t nb;
+    size_t n, cap;       /* vertices */
+    rp_vec3 *p;
+    uint32_t *surface;
+    double *acc;         /* n x nb: sum of A B over leaves with this corner */
+    double *area;
+    uint32_t *ta, *tb;   /* anchor edge of a T-vertex, RP_NONE otherwise */
+    double *tlen;        /* squared length of that edge */
+    double *val;         /* n x nb: resolved radiosity */
+    unsigned char *state; /* 0 unresolved, 1 in progress, 2 done */
+    uint32_t *slot;      /* open addressing, hmask + 1 entries */
+    size_t hmask;
+} vtx_table;
+
+static uint64_t vtx_hash(uint32_t surface, rp_vec3 p)
+{
+    uint64_t w[3];
+    memcpy(&w[0], &p.x, 8);
+    memcpy(&w[1], &p.y, 8);
+    memcpy(&w[2], &p.z, 8);
+    uint64_t h = hier_mix(surface + UINT64_C(0x9e3779b97f4a7c15));
+    for (int k = 0; k < 3; k++)
+        h = hier_mix(h ^ w[k]);
+    return h;
+}
+
+static int vtx_same(const vtx_table *t, uint32_t id, uint32_t surface, rp_vec3 p)
+{
+    return t->surface[id] == surface && t->p[id].x == p.x && t->p[id].y == p.y && t->p[id].z == p.z;
+}
+
+static uint32_t vtx_find(const vtx_table *t, uint32_t surface, rp_vec3 p)
+{
+    size_t h = (size_t)vtx_hash(surface, p) & t->hmask;
+    while (t->slot[h] != RP_NONE) {
+        if (vtx_same(t, t->slot[h], surface, p))
+            return t->slot[h];
+        h = (h + 1) & t->hmask;
+    }
+    return RP_NONE;
+}
+
+/* The table is sized for every corner up front, so it never fills. */
+static uint32_t vtx_insert(vtx_table *t, uint32_t surface, rp_vec3 p)
+{
+    size_t h = (size_t)vtx_hash(surface, p) & t->hmask;
+    while (t->slot[h] != RP_NONE) {
+        if (vtx_same(t, t->slot[h], surface, p))
+            return t->slot[h];
+        h = (h + 1) & t->hmask;
+    }
+    uint32_t id = (uint32_t)t->n++;
+    t->slot[h] = id;
+    t->p[id] = p;
+    t->surface[id] = surface;
+    t->ta[id] = t->tb[id] = RP_NONE;
+    t->tlen[id] = 0;
+    t->area[id] = 0;
+    t->state[id] = 0;
+    for (size_t b = 0; b < t->nb; b++)
+        t->acc[(size_t)id * t->nb + b] = 0;
+    return id;
+}
+
+static void vtx_free(vtx_table *t)
+{
+    free(t->p);
+    free(t->surface);
+    free(t->acc);
+    free(t->area);
+    free(t->ta);
+    free(t->tb);
+    free(t->tlen);
+    free(t->val);
+    free(t->state);
+    free(t->slot);
+}
+
+static int vtx_alloc(vtx_table *t, size_t cap, size_t nb)
+{
+    memset(t, 0, sizeof *t);
+    t->nb = nb;
+    t->cap = cap;
+    size_t hs = 16;
+    while (hs < 2 * cap)
+        hs *= 2;
+    t->hmask = hs - 1;
+    t->p = malloc(cap * sizeof *t->p);
+    t->surface = malloc(cap * sizeof *t->surface);
+    t->acc = malloc(cap * nb * sizeof *t->acc);
+    t->area = malloc(cap * sizeof *t->area);
+    t->ta = malloc(cap * sizeof *t->ta);
+    t->tb = malloc(cap * sizeof *t->tb);
+    t->tlen = malloc(cap * sizeof *t->tlen);
+    t->val = malloc(cap * nb * sizeof *t->val);
+    t->state = malloc(cap);
+    t->slot = malloc(hs * sizeof *t->slot);
+    if (!t->p || !t->surface || !t->acc || !t->area || !t->ta || !t->tb || !t->tlen || !t->val ||
+        !t->state || !t->slot)
+        return 0;
+    for (size_t k = 0; k < hs; k++)
+        t->slot[k] = RP_NONE;
+    return 1;
+}
+
+/* Walks the dyadic points inside edge (a, b) of a leaf: each one that is a
+ * vertex of some finer leaf is a T-vertex, anchored to the longest leaf
+ * edge it lies inside.  Its value is the mean of the edge's two ends, which
+ * applied recursively is linear interpolation along the coarse edge. */
+static void vtx_probe(vtx_table *t, uint32_t surface, uint32_t a, uint32_t b, double len2, int depth)
+{
+    if (depth > 48)
+        return;
+    rp_vec3 m = rp_v3_scale(rp_v3_add(t->p[a], t->p[b]), 0.5); /* as hier_tree.c's mid() */
+    uint32_t id = vtx_find(t, surface, m);
+    if (id == RP_NONE)
+        return; /* no finer leaf meets this edge here (nor, then, nearer the ends) */
+    if (id == a || id == b)
+        return;
+    if (t->ta[id] == RP_NONE || len2 > t->tlen[id]) {
+        t->ta[id] = a;
+        t->tb[id] = b;
+        t->tlen[id] = len2;
+    }
+    vtx_probe(t, surface, a, id, 0.25 * len2, depth + 1);
+    vtx_probe(t, surface, id, b, 0.25 * len2, depth + 1);
+}
+
+static const double *vtx_value(vtx_table *t, uint32_t id)
+{
+    const size_t nb = t->nb;
+    double *v = t->val + (size_t)id * nb;
+    if (t->state[id] == 2)
+        return v;
+    if (t->state[id] == 1 || t->ta[id] == RP_NONE) {
+        /* Ordinary vertex (or a cycle, which the anchoring by the longest
+         * edge rules out): the area-weighted mean of its leaves. */
+        for (size_t b = 0; b < nb; b++)
+            v[b] = t->area[id] > 0 ? t->acc[(size_t)id * nb + b] / t->area[id] : 0;
+        t->state[id] = 2;
+        return v;
+    }
+    t->state[id] = 1;
+    const double *va = vtx_value(t, t->ta[id]);
+    const double *vb = vtx_value(t, t->tb[id]);
+    for (size_t b = 0; b < nb; b++)
+        v[b] = 0.5 * (va[b] + vb[b]);
+    t->state[id] = 2;
+    return v;
+}
+
+/* Vertex radiosities of every leaf corner: lv[leafpos[node] * 4 + k] names
+ * the vertex, val its value. */
+static rp_status build_vertices(const hier_state *s, vtx_table *t, uint32_t *leafpos, uint32_t **lv_out,
+                                rp_error *err)
+{
+    const size_t nb = s->nb;
+    size_t nleaves = 0;
+    for (size_t i = 0; i < s->nnodes; i++) {
+        leafpos[i] = s->nodes[i].child == RP_NONE ? (uint32_t)nleaves++ : RP_NONE;
+    }
+    uint32_t *lv = malloc((nleaves ? nleaves : 1) * 4 * sizeof *lv);
+    if (!lv || !vtx_alloc(t, 4 * nleaves + 4, nb)) {
+        free(lv);
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image vertices");
+    }
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        if (leafpos[i] == RP_NONE)
+            continue;
+        uint32_t sf = s->faces[nd->face].surface;
+        uint32_t *c = lv + (size_t)leafpos[i] * 4;
+        c[3] = RP_NONE;
+        for (int k = 0; k < nd->nverts; k++) {
+            c[k] = vtx_insert(t, sf, nd->v[k]);
+            t->area[c[k]] += nd->area;
+            for (size_t b = 0; b < nb; b++)
+                t->acc[(size_t)c[k] * nb + b] += nd->area * s->B[i * nb + b];
+        }
+    }
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        if (leafpos[i] == RP_NONE)
+            continue;
+        uint32_t sf = s->faces[nd->face].surface;
+        const uint32_t *c = lv + (size_t)leafpos[i] * 4;
+        for (int k = 0; k < nd->nverts; k++) {
+            uint32_t a = c[k], b = c[(k + 1) % nd->nverts];
+            rp_vec3 d = rp_v3_sub(t->p[b], t->p[a]);
+            vtx_probe(t, sf, a, b, rp_v3_dot(d, d), 0);
+        }
+    }
+    for (size_t v = 0; v < t->n; v++)
+        vtx_value(t, (uint32_t)v);
+    *lv_out = lv;
+    return RP_OK;
+}
+
+/* ---- the image ---- */
+
+/* Stratified positions of n samples in the unit square: a jittered
+ * sqrt(n) x sqrt(n) grid when n is a square, else n-rooks. */
+static void strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
+{
+    unsigned m = (unsigned)floor(sqrt((double)n) + 0.5);
+    if (m * m == n) {
+        for (unsigned k = 0; k < n; k++) {
+            xy[2 * k] = ((k % m) + hier_u01(key, 2 * (uint64_t)k)) / m;
+            xy[2 * k + 1] = ((k / m) + hier_u01(key, 2 * (uint64_t)k + 1)) / m;
+        }
+        return;
+    }
+    for (unsigned k = 0; k < n; k++)
+        perm[k] = k;
+    for (unsigned k = n; k > 1; k--) {
+        unsigned j = (unsigned)(hier_u01(key, 2 * (uint64_t)n + k) * k);
+        j = j < k ? j : k - 1;
+        uint32_t tmp = perm[k - 1];
+        perm[k - 1] = perm[j];
+        perm[j] = tmp;
+    }
+    for (unsigned k = 0; k < n; k++) {
+        xy[2 * k] = (perm[k] + hier_u01(key, 2 * (uint64_t)k)) / n;
+        xy[2 * k + 1] = (k + hier_u01(key, 2 * (uint64_t)k + 1)) / n;
+    }
+}
+
+typedef struct img_job {
+    const hier_state *s;
+    const vtx_table *vt;
+    const uint32_t *leafpos, *lv;
+} img_job;
+
+static void shade(const img_job *j, const rp_hit *h, uint64_t key, double *xyg, uint32_t *perm, double *L,
+                  unsigned long long *rays)
+{
+    const hier_state *s = j->s;
+    const size_t nb = s->nb;
+    for (size_t b = 0; b < nb; b++)
+        L[b] = 0;
+    if (!h->front)
+        return; /* the back of a face is black */
+    double w[4];
+    uint32_t leaf = hier_locate(s, h->face, h->p, w);
+    switch (s->recon) {
+    case HIER_RECON_FLAT:
+        for (size_t b = 0; b < nb; b++)
+            L[b] = s->B[(size_t)leaf * nb + b] / RP_PI;
+        return;
+    case HIER_RECON_GOURAUD: {
+        const hier_node *nd = &s->nodes[leaf];
+        const uint32_t *c = j->lv + (size_t)j->leafpos[leaf] * 4;
+        for (int k = 0; k < nd->nverts; k++)
+            for (size_t b = 0; b < nb; b++)
+                L[b] += w[k] * j->vt->val[(size_t)c[k] * nb + b];
+        for (size_t b = 0; b < nb; b++)
+            L[b] /= RP_PI;
+        return;
+    }
+    case HIER_RECON_GATHER: {
+        /* E = int L_in cos dw ~ (pi / G) sum L_in = (1 / G) sum B_hit for
+         * cosine-distributed directions (pdf cos / pi). */
+        const hier_face *f = &s->faces[h->face];
+        const unsigned G = s->gather_rays;
+        double acc[HIER_MAX_BANDS];
+        for (size_t b = 0; b < nb; b++)
+            acc[b] = 0;
+        strata(key, G, perm, xyg);
+        rp_vec3 t, bt;
+        rp_v3_basis(h->n, &t, &bt);
+        for (unsigned k = 0; k < G; k++) {
+            double u1 = xyg[2 * k], u2 = xyg[2 * k + 1];
+            double r = sqrt(u1), phi = 2.0 * RP_PI * u2, c = sqrt(1.0 - u1);
+            rp_vec3 wi = rp_v3_madd(rp_v3_madd(rp_v3_scale(h->n, c), t, r * cos(phi)), bt, r * sin(phi));
+            rp_hit g;
+            (*rays)++;
+            if (!rp_ray_closest_from(s->rc, h->p, h->n, wi, &g) || !g.front)
+                continue;
+            double wg[4];
+            uint32_t lg = hier_locate(s, g.face, g.p, wg);
+            for (size_t b = 0; b < nb; b++)
+                acc[b] += s->B[(size_t)lg * nb + b];
+        }
+        for (size_t b = 0; b < nb; b++)
+            L[b] = f->Le[b] + f->rho[b] / RP_PI * acc[b] / G;
+        return;
+    }
+    }
+}
+
+rp_status hier_image(const hier_state *s, float *out, float *variance, double *rays, rp_error *err)
+{
+    const rp_camera *cam = rp_scene_camera(s->scene);
+    if (!cam)
+        return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
+    rp_camera_frame frame;
+    rp_camera_frame_init(&frame, cam);
+    const size_t nb = s->nb;
+    img_job job = {.s = s};
+    vtx_table vt;
+    memset(&vt, 0, sizeof vt);
+    uint32_t *leafpos = NULL, *lv = NULL;
+    rp_status st = RP_OK;
+    if (s->recon == HIER_RECON_GOURAUD) {
+        leafpos = malloc((s->nnodes ? s->nnodes : 1) * sizeof *leafpos);
+        if (!leafpos) {
+            st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image vertices");
+            goto done;
+        }
+        if ((st = build_vertices(s, &vt, leafpos, &lv, err)) != RP_OK)
+            goto done;
+        job.vt = &vt;
+        job.leafpos = leafpos;
+        job.lv = lv;
+    }
+    const uint32_t W = cam->width, H = cam->height;
+    const unsigned spp = s->spp;
+    const unsigned G = s->recon == HIER_RECON_GATHER ? s->gather_rays : 1;
+    const unsigned nperm = spp > G ? spp : G;
+    unsigned long long nrays = 0;
+    int failed = 0;
+#pragma omp parallel num_threads(s->threads) reduction(+ : nrays)
+    {
+        double *xy = malloc(2 * (size_t)spp * sizeof *xy);
+        double *xyg = malloc(2 * (size_t)G * sizeof *xyg);
+        uint32_t *perm = malloc((size_t)nperm * sizeof *perm);
+        if (!xy || !xyg || !perm) {
+#pragma omp atomic write
+            failed = 1;
+        }
+#pragma omp for schedule(dynamic, 1)
+        for (long y = 0; y < (long)H; y++) {
+            if (!xy || !xyg || !perm)
+                continue;
+            double L[HIER_MAX_BANDS], sum[HIER_MAX_BANDS], sq[HIER_MAX_BANDS];
+            for (uint32_t x = 0; x < W; x++) {
+                uint64_t pix = (uint64_t)y * W + x;
+                strata(hier_key(s->seed, pix, 0), spp, perm, xy);
+                for (size_t b = 0; b < nb; b++)
+                    sum[b] = sq[b] = 0;
+                for (unsigned k = 0; k < spp; k++) {
+                    rp_vec3 d = rp_camera_direction(&frame, x + xy[2 * k], (double)y + xy[2 * k + 1]);
+                    rp_hit h;
+                    nrays++;
+                    if (!rp_ray_closest(s->rc, frame.eye, d, INFINITY, &h))
+                        continue; /* a miss is black */
+                    shade(&job, &h, hier_key(s->seed, pix, (uint64_t)k + 1), xyg, perm, L, &nrays);
+                    for (size_t b = 0; b < nb; b++) {
+                        sum[b] += L[b];
+                        sq[b] += L[b] * L[b];
+                    }
+                }
+                float *o = out + pix * nb;
+                for (size_t b = 0; b < nb; b++)
+                    o[b] = (float)(sum[b] / spp);
+                if (variance) {
+                    float *v = variance + pix * nb;
+                    for (size_t b = 0; b < nb; b++) {
+                        double var = spp > 1 ? (sq[b] - sum[b] * sum[b] / spp) / (spp - 1) / spp : INFINITY;
+                        v[b] = (float)(var > 0 ? var : 0);
+                    }
+                }
+            }
+        }
+        free(xy);
+        free(xyg);
+        free(perm);
+    }
+    if (failed)
+        st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image scratch");
+    else if (rays)
+        *rays += (double)nrays;
+done:
+    vtx_free(&vt);
+    free(leafpos);
+    free(lv);
+    return st;
+}

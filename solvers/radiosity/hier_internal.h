@@ -1,0 +1,196 @@
+/* Hierarchical radiosity's private state, shared by hierarchical.c (the
+ * solver), hier_tree.c (quadtrees and geometry), hier_link.c (form-factor
+ * estimates and link refinement) and hier_image.c (answers).  Not a public
+ * module. */
+#ifndef RP_HIER_INTERNAL_H
+#define RP_HIER_INTERNAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../../geometry/raycast.h"
+#include "../../geometry/scene.h"
+#include "../solver.h"
+#include "hierarchical.h"
+
+/* Per-band arrays on the stack. */
+#define HIER_MAX_BANDS 256
+/* Initial links are refused above this many faces by default (O(n^2)). */
+#define HIER_DEFAULT_MAX_FACES 4096
+/* Root-pair occluder lists (shaft culling) up to this many faces. */
+#define HIER_CULL_MAX_FACES 512
+/* A point far from a source (r^2 > ratio x source area) uses the disk
+ * approximation instead of the contour integral. */
+#define HIER_DISK_RATIO 1000.0
+/* Receivers closer than sqrt(ratio x area) to the source's centroid
+ * integrate the kernel over their four quarters. */
+#ifndef HIER_NEAR_RATIO
+#define HIER_NEAR_RATIO 16.0
+#endif
+
+/* A quadtree node: a root face or a piece of one.  Children are four
+ * consecutive nodes with larger indices than their parent. */
+typedef struct hier_node {
+    rp_vec3 v[4];      /* corners, counter-clockwise from the front (3 for triangles) */
+    rp_vec3 c;         /* centroid */
+    double area;
+    uint32_t face;     /* the scene face this node is part of (= its root's index) */
+    uint32_t parent;   /* RP_NONE for roots */
+    uint32_t child;    /* first of four children, RP_NONE for a leaf */
+    uint16_t nverts;   /* 3 or 4 */
+    uint16_t depth;    /* 0 for roots */
+} hier_node;
+
+enum {
+    HIER_LINK_PARTIAL = 1u << 0,  /* some visibility rays blocked */
+    HIER_LINK_STRADDLE = 1u << 1, /* one element crosses the other's plane */
+    HIER_LINK_TESTED = 1u << 2    /* visibility was sampled by rays */
+};
+
+/* A one-way link: the receiver gathers rho F B_src through it. */
+typedef struct hier_link {
+    uint32_t recv, src;
+    double F;        /* form-factor estimate times visibility */
+    float F_err;     /* the oracle's form-factor bound (unoccluded estimate
+                        for partial or straddling links) */
+    uint32_t flags;
+} hier_link;
+
+/* What is fixed per scene face. */
+typedef struct hier_face {
+    rp_vec3 n;          /* unit front normal */
+    double d;           /* plane: dot(n, x) = d */
+    rp_vec3 lo, hi;     /* bounding box */
+    const double *rho;  /* per band */
+    const double *Le;
+    uint32_t surface;
+} hier_face;
+
+typedef enum hier_recon {
+    HIER_RECON_FLAT,
+    HIER_RECON_GOURAUD,
+    HIER_RECON_GATHER
+} hier_recon;
+
+typedef struct hier_state {
+    const rp_scene *scene;
+    size_t nb, nfaces;
+    int threads;
+    unsigned want;
+    int open_ended;
+    rp_log_fn log;
+    void *log_ctx;
+    uint64_t seed;
+    rp_raycast *rc;
+    double eps;          /* plane tolerance, scene units */
+
+    hier_face *faces;    /* nfaces */
+    double e_norm[HIER_MAX_BANDS]; /* sum over faces of A E per band */
+    double total_area;
+
+    hier_node *nodes;
+    size_t nnodes, cap_nodes;
+    double *B;           /* nnodes x nb: radiosity (area mean over the node) */
+    double *Bg;          /* nnodes x nb: rho x radiosity gathered by the node's links */
+    double *Bd;          /* nnodes x nb: gathered radiosity pushed down from ancestors */
+
+    hier_link *links;    /* sorted by receiver after every refinement pass */
+    size_t nlinks, cap_links;
+    uint32_t *link_start; /* nnodes + 1 offsets into links (CSR by receiver) */
+    size_t cap_start;
+
+    /* Shaft culling (Haines & Wallace 1994): for each pair of faces, the
+     * faces that may block a segment between them. */
+    int cull;
+    uint32_t *pair_off;  /* nfaces x nfaces */
+    uint16_t *pair_cnt;
+    uint32_t *cand;
+    size_t ncand;
+
+    /* Parameters. */
+    double bf_rel, min_area_rel;   /* as given: relative */
+    double bf_eps, min_area;       /* absolute */
+    double partial_weight;
+    double tolerance;
+    int tolerance_given;
+    unsigned long max_iterations;
+    int max_iterations_given;
+    unsigned vis_rays;
+    unsigned long max_faces;
+    hier_recon recon;
+    unsigned spp, gather_rays;
+
+    /* Progress. */
+    int linked;
+    unsigned long iterations, refine_passes;
+    double residual;
+    size_t links_full, links_partial, links_invisible, links_refined;
+    double rays;         /* visibility rays cast so far */
+    double form_factors; /* link form factors estimated so far */
+    size_t bytes;
+} hier_state;
+
+/* ---- hier_tree.c ---- */
+
+/* One root node per scene face (node i is face i). */
+rp_status hier_nodes_init(hier_state *s, rp_error *err);
+/* Gives node i four children (no-op if it has them); their radiosity
+ * starts at the parent's. */
+rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err);
+/* A point on a node from (u1, u2) in [0, 1)^2, uniform in area for
+ * triangles and parallelograms. */
+rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2);
+/* Lambert's contour integral (ground-truth.md): the form factor from a
+ * differential area at x with unit normal n to polygon poly[0..m-1],
+ * clipped to the half-space in front of x's tangent plane. */
+double hier_point_polygon(rp_vec3 x, rp_vec3 n, const rp_vec3 *poly, int m);
+/* The leaf of face f that contains p (a point on the face), and the
+ * interpolation weights of its corners at p (w[3] = 0 for triangles). */
+uint32_t hier_locate(const hier_state *s, uint32_t f, rp_vec3 p, double w[4]);
+/* Centroids and areas of the four children node i would get, without
+ * creating them. */
+void hier_child_centroids(const hier_node *nd, rp_vec3 c[4], double area[4]);
+/* Memory the nodes, radiosities and links hold. */
+size_t hier_bytes(const hier_state *s);
+
+/* ---- hier_link.c ---- */
+
+rp_status hier_cull_init(hier_state *s, rp_error *err);
+/* Links every pair of faces that can see each other. */
+rp_status hier_link_initial(hier_state *s, rp_error *err);
+/* One refinement pass with the current radiosities (Hanrahan et al. 1991,
+ * sec. 5, "BF refinement"); *refined gets the links replaced. */
+rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err);
+
+/* ---- hier_image.c ---- */
+
+/* Area-weighted mean of B / pi over each surface's leaves: out[s * nb + b]. */
+void hier_surfaces(const hier_state *s, double *out);
+/* The camera image (width x height x nb radiance) and optional per-pixel
+ * variance of the mean; *rays gets the rays cast added. */
+rp_status hier_image(const hier_state *s, float *out, float *variance, double *rays,
+                     rp_error *err);
+
+/* ---- shared helpers ---- */
+
+/* Counter-based random numbers (a pure function of the key and the
+ * dimension), so results do not depend on the thread schedule:
+ * splitmix64's finaliser (Steele, Lea & Flood 2014) as the mixer. */
+static inline uint64_t hier_mix(uint64_t z)
+{
+    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
+    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
+    return z ^ (z >> 31);
+}
+
+static inline uint64_t hier_key(uint64_t seed, uint64_t a, uint64_t b)
+{
+    return hier_mix(hier_mix(hier_mix(seed ^ UINT64_C(0x41e7a2c4b5d3f901)) ^ a) + b);
+}
+
+static inline double hier_u01(uint64_t key, uint64_t d)
+{
+    return (double)(hier_mix(key + (d + 1) * UINT64_C(0x9e3779b97f4a7c15)) >> 11) * 0x1.0p-53;
+}
+
+#endif

@@ -1,0 +1,349 @@
+/* Hierarchical radiosity: the quadtrees over the scene's faces, and the
+ * geometry they need (Hanrahan, Salzman & Aupperle 1991, sec. 3).
+ *
+ * Each face is the root of a quadtree.  A triangle splits into four at its
+ * edge midpoints; a quad (planar, convex) splits into four along its
+ * bilinear iso-parameter lines u = 1/2 and v = 1/2, which are straight, so
+ * the children are quads again (parallelograms stay parallelograms).
+ *
+ * Every point on an edge of a child is computed as the midpoint (a + b) / 2
+ * of the two points that bound it on the coarser level, and IEEE addition is
+ * commutative, so two leaves that meet along an edge (in one face or across
+ * faces that share the edge) produce bit-identical vertices: the image code
+ * finds shared vertices and T-vertices by exact look-up (hier_image.c). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "hier_internal.h"
+
+static inline rp_vec3 mid(rp_vec3 a, rp_vec3 b) { return rp_v3_scale(rp_v3_add(a, b), 0.5); }
+
+static double tri_area(rp_vec3 a, rp_vec3 b, rp_vec3 c)
+{
+    return 0.5 * rp_v3_length(rp_v3_cross(rp_v3_sub(b, a), rp_v3_sub(c, a)));
+}
+
+/* Area and area centroid of a node from its corners (a convex quad is two
+ * triangles). */
+static void node_measure(hier_node *nd)
+{
+    if (nd->nverts == 3) {
+        nd->area = tri_area(nd->v[0], nd->v[1], nd->v[2]);
+        nd->c = rp_v3_scale(rp_v3_add(rp_v3_add(nd->v[0], nd->v[1]), nd->v[2]), 1.0 / 3.0);
+        return;
+    }
+    double a1 = tri_area(nd->v[0], nd->v[1], nd->v[2]);
+    double a2 = tri_area(nd->v[0], nd->v[2], nd->v[3]);
+    rp_vec3 c1 = rp_v3_scale(rp_v3_add(rp_v3_add(nd->v[0], nd->v[1]), nd->v[2]), 1.0 / 3.0);
+    rp_vec3 c2 = rp_v3_scale(rp_v3_add(rp_v3_add(nd->v[0], nd->v[2]), nd->v[3]), 1.0 / 3.0);
+    nd->area = a1 + a2;
+    nd->c = nd->area > 0 ? rp_v3_scale(rp_v3_add(rp_v3_scale(c1, a1), rp_v3_scale(c2, a2)), 1.0 / nd->area)
+                         : c1;
+}
+
+static rp_status grow_nodes(hier_state *s, size_t need, rp_error *err)
+{
+    if (need <= s->cap_nodes)
+        return RP_OK;
+    size_t cap = s->cap_nodes ? s->cap_nodes : 1024;
+    while (cap < need)
+        cap *= 2;
+    hier_node *nd = realloc(s->nodes, cap * sizeof *nd);
+    if (!nd)
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
+    s->nodes = nd;
+    double **arrs[3] = {&s->B, &s->Bg, &s->Bd};
+    for (int k = 0; k < 3; k++) {
+        double *a = realloc(*arrs[k], cap * s->nb * sizeof *a);
+        if (!a)
+            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
+        *arrs[k] = a;
+    }
+    s->cap_nodes = cap;
+    return RP_OK;
+}
+
+rp_status hier_nodes_init(hier_state *s, rp_error *err)
+{
+    const rp_face *faces = rp_scene_faces(s->scene);
+    const rp_vec3 *vs = rp_scene_vertices(s->scene);
+    rp_status st = grow_nodes(s, s->nfaces * 2 + 16, err);
+    if (st != RP_OK)
+        return st;
+    for (size_t f = 0; f < s->nfaces; f++) {
+        hier_node *nd = &s->nodes[f];
+        memset(nd, 0, sizeof *nd);
+        nd->nverts = (uint16_t)faces[f].nverts;
+        for (uint32_t k = 0; k < faces[f].nverts; k++)
+            nd->v[k] = vs[faces[f].v[k]];
+        if (nd->nverts == 3)
+            nd->v[3] = nd->v[2];
+        node_measure(nd);
+        nd->face = (uint32_t)f;
+        nd->parent = RP_NONE;
+        nd->child = RP_NONE;
+        const double *Le = s->faces[f].Le;
+        for (size_t b = 0; b < s->nb; b++) {
+            /* B starts at E = pi Le (Cohen & Wallace 1993, eq. 2.4). */
+            s->B[f * s->nb + b] = RP_PI * Le[b];
+            s->Bg[f * s->nb + b] = 0;
+            s->Bd[f * s->nb + b] = 0;
+        }
+    }
+    s->nnodes = s->nfaces;
+    return RP_OK;
+}
+
+/* The corners of a node's four children. */
+static void child_corners(const hier_node *p, rp_vec3 cv[4][4])
+{
+    if (p->nverts == 3) {
+        rp_vec3 a = p->v[0], b = p->v[1], c = p->v[2];
+        rp_vec3 mab = mid(a, b), mbc = mid(b, c), mca = mid(c, a);
+        /* Corners keep the parent's orientation; the middle child's
+         * barycentrics are 1 - 2 lambda (hier_locate). */
+        rp_vec3 t[4][3] = {{a, mab, mca}, {mab, b, mbc}, {mca, mbc, c}, {mbc, mca, mab}};
+        for (int k = 0; k < 4; k++) {
+            cv[k][0] = t[k][0];
+            cv[k][1] = t[k][1];
+            cv[k][2] = t[k][2];
+            cv[k][3] = t[k][2];
+        }
+        return;
+    }
+    rp_vec3 c0 = p->v[0], c1 = p->v[1], c2 = p->v[2], c3 = p->v[3];
+    rp_vec3 m01 = mid(c0, c1), m12 = mid(c1, c2), m23 = mid(c2, c3), m30 = mid(c3, c0);
+    rp_vec3 ctr = mid(m01, m23); /* the bilinear patch at (1/2, 1/2) */
+    /* Child k covers u in [u0, u0 + 1/2], v in [v0, v0 + 1/2] with
+     * (u0, v0) = (0,0), (1/2,0), (1/2,1/2), (0,1/2). */
+    rp_vec3 q[4][4] = {{c0, m01, ctr, m30}, {m01, c1, m12, ctr}, {ctr, m12, c2, m23}, {m30, ctr, m23, c3}};
+    memcpy(cv, q, sizeof q);
+}
+
+void hier_child_centroids(const hier_node *nd, rp_vec3 c[4], double area[4])
+{
+    rp_vec3 cv[4][4];
+    child_corners(nd, cv);
+    for (int k = 0; k < 4; k++) {
+        hier_node t;
+        memcpy(t.v, cv[k], sizeof t.v);
+        t.nverts = nd->nverts;
+        node_measure(&t);
+        c[k] = t.c;
+        area[k] = t.area;
+    }
+}
+
+rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err)
+{
+    if (s->nodes[i].child != RP_NONE)
+        return RP_OK;
+    if (s->nnodes + 4 > UINT32_MAX - 1)
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: more than 2^32 nodes");
+    rp_status st = grow_nodes(s, s->nnodes + 4, err);
+    if (st != RP_OK)
+        return st;
+    hier_node *p = &s->nodes[i];
+    uint32_t first = (uint32_t)s->nnodes;
+    hier_node *ch = &s->nodes[first];
+    rp_vec3 cv[4][4];
+    child_corners(p, cv);
+    const size_t nb = s->nb;
+    for (int k = 0; k < 4; k++) {
+        hier_node *c = &ch[k];
+        memset(c, 0, sizeof *c);
+        memcpy(c->v, cv[k], sizeof c->v);
+        c->nverts = p->nverts;
+        c->face = p->face;
+        c->parent = i;
+        c->child = RP_NONE;
+        c->depth = (uint16_t)(p->depth + 1);
+        node_measure(c);
+        size_t ci = (size_t)first + (size_t)k;
+        for (size_t b = 0; b < nb; b++) {
+            s->B[ci * nb + b] = s->B[(size_t)i * nb + b];
+            s->Bg[ci * nb + b] = 0;
+            s->Bd[ci * nb + b] = 0;
+        }
+    }
+    p->child = first;
+    s->nnodes += 4;
+    return RP_OK;
+}
+
+rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2)
+{
+    if (nd->nverts == 3) {
+        /* Uniform on a triangle (Shirley's square-to-triangle map keeps
+         * strata). */
+        double r = sqrt(u1);
+        rp_vec3 p = rp_v3_scale(nd->v[0], 1.0 - r);
+        p = rp_v3_madd(p, nd->v[1], r * (1.0 - u2));
+        return rp_v3_madd(p, nd->v[2], r * u2);
+    }
+    rp_vec3 p = rp_v3_scale(nd->v[0], (1 - u1) * (1 - u2));
+    p = rp_v3_madd(p, nd->v[1], u1 * (1 - u2));
+    p = rp_v3_madd(p, nd->v[2], u1 * u2);
+    return rp_v3_madd(p, nd->v[3], (1 - u1) * u2);
+}
+
+double hier_point_polygon(rp_vec3 x, rp_vec3 n, const rp_vec3 *poly, int m)
+{
+    /* Sutherland-Hodgman clip to dot(n, y - x) >= 0: the contour formula
+     * holds only for the part of the polygon above x's tangent plane. */
+    rp_vec3 r[10];
+    int k = 0;
+    for (int i = 0; i < m; i++) {
+        rp_vec3 a = rp_v3_sub(poly[i], x), b = rp_v3_sub(poly[(i + 1) % m], x);
+        double da = rp_v3_dot(n, a), db = rp_v3_dot(n, b);
+        if (da >= 0)
+            r[k++] = a;
+        if ((da >= 0) != (db >= 0)) {
+            double t = da / (da - db);
+            r[k++] = rp_v3_madd(a, rp_v3_sub(b, a), t);
+        }
+    }
+    if (k < 3)
+        return 0;
+    /* F = 1/(2 pi) sum_i gamma_i n . (R_i x R_i+1) / |R_i x R_i+1|
+     * (Lambert; Baum, Rushmeier & Winget 1989, eq. 3). */
+    double sum = 0;
+    for (int i = 0; i < k; i++) {
+        rp_vec3 a = r[i], b = r[(i + 1) % k];
+        rp_vec3 c = rp_v3_cross(a, b);
+        double cl = rp_v3_length(c);
+        if (!(cl > 0))
+            continue;
+        double gamma = atan2(cl, rp_v3_dot(a, b));
+        sum += gamma * rp_v3_dot(n, c) / cl;
+    }
+    return fabs(sum) / (2.0 * RP_PI);
+}
+
+/* Inverse of the bilinear map P(u, v) of a planar quad, in the face's own
+ * 2-d frame: p - v0 = u e + v f + u v g with e = v1 - v0, f = v3 - v0,
+ * g = v0 - v1 + v2 - v3.  Crossing with (e + v g) eliminates u and leaves
+ * k2 v^2 + k1 v + k0 = 0. */
+static void inverse_bilinear(const hier_node *nd, rp_vec3 n, rp_vec3 p, double *uo, double *vo)
+{
+    rp_vec3 t, bt;
+    rp_v3_basis(n, &t, &bt);
+    rp_vec3 E = rp_v3_sub(nd->v[1], nd->v[0]), Fv = rp_v3_sub(nd->v[3], nd->v[0]);
+    rp_vec3 G = rp_v3_add(rp_v3_sub(nd->v[0], nd->v[1]), rp_v3_sub(nd->v[2], nd->v[3]));
+    rp_vec3 H = rp_v3_sub(p, nd->v[0]);
+    double e[2] = {rp_v3_dot(E, t), rp_v3_dot(E, bt)};
+    double f[2] = {rp_v3_dot(Fv, t), rp_v3_dot(Fv, bt)};
+    double g[2] = {rp_v3_dot(G, t), rp_v3_dot(G, bt)};
+    double h[2] = {rp_v3_dot(H, t), rp_v3_dot(H, bt)};
+#define CROSS2(a, b) ((a)[0] * (b)[1] - (a)[1] * (b)[0])
+    double k2 = CROSS2(g, f), k1 = CROSS2(e, f) + CROSS2(h, g), k0 = CROSS2(h, e);
+#undef CROSS2
+    double v;
+    if (fabs(k2) <= 1e-12 * fabs(k1)) {
+        v = k1 != 0 ? -k0 / k1 : 0;
+    } else {
+        double w = k1 * k1 - 4 * k0 * k2;
+        w = w > 0 ? sqrt(w) : 0;
+        /* The two roots in a cancellation-free form; take the one in
+         * [0, 1] (the other lies outside a convex quad). */
+        double q = -0.5 * (k1 + copysign(w, k1));
+        double r1 = q / k2, r2 = q != 0 ? k0 / q : r1;
+        double d1 = r1 < 0 ? -r1 : (r1 > 1 ? r1 - 1 : 0);
+        double d2 = r2 < 0 ? -r2 : (r2 > 1 ? r2 - 1 : 0);
+        v = d1 <= d2 ? r1 : r2;
+    }
+    double den0 = e[0] + v * g[0], den1 = e[1] + v * g[1];
+    double u = fabs(den0) >= fabs(den1) ? (h[0] - v * f[0]) / den0 : (h[1] - v * f[1]) / den1;
+    if (!isfinite(u))
+        u = 0.5;
+    if (!isfinite(v))
+        v = 0.5;
+    *uo = u < 0 ? 0 : (u > 1 ? 1 : u);
+    *vo = v < 0 ? 0 : (v > 1 ? 1 : v);
+}
+
+uint32_t hier_locate(const hier_state *s, uint32_t f, rp_vec3 p, double w[4])
+{
+    const hier_node *nodes = s->nodes;
+    uint32_t i = f;
+    const hier_node *nd = &nodes[i];
+    rp_vec3 n = s->faces[f].n;
+    if (nd->nverts == 3) {
+        /* Barycentrics from signed areas in the face's plane. */
+        rp_vec3 a = nd->v[0], b = nd->v[1], c = nd->v[2];
+        double den = rp_v3_dot(n, rp_v3_cross(rp_v3_sub(b, a), rp_v3_sub(c, a)));
+        double l1 = rp_v3_dot(n, rp_v3_cross(rp_v3_sub(p, a), rp_v3_sub(c, a))) / den;
+        double l2 = rp_v3_dot(n, rp_v3_cross(rp_v3_sub(b, a), rp_v3_sub(p, a))) / den;
+        if (!isfinite(l1) || !isfinite(l2))
+            l1 = l2 = 1.0 / 3.0;
+        l1 = l1 < 0 ? 0 : l1;
+        l2 = l2 < 0 ? 0 : l2;
+        if (l1 + l2 > 1) {
+            double sc = 1.0 / (l1 + l2);
+            l1 *= sc;
+            l2 *= sc;
+        }
+        double l[3] = {1 - l1 - l2, l1, l2};
+        while (nd->child != RP_NONE) {
+            /* Corner child k where lambda_k > 1/2, else the middle one
+             * (hier_subdivide's child order). */
+            int k;
+            if (l[0] > 0.5) {
+                k = 0;
+                l[1] *= 2;
+                l[2] *= 2;
+                l[0] = 1 - l[1] - l[2];
+            } else if (l[1] > 0.5) {
+                k = 1;
+                l[0] *= 2;
+                l[2] *= 2;
+                l[1] = 1 - l[0] - l[2];
+            } else if (l[2] > 0.5) {
+                k = 2;
+                l[0] *= 2;
+                l[1] *= 2;
+                l[2] = 1 - l[0] - l[1];
+            } else {
+                k = 3;
+                for (int j = 0; j < 3; j++)
+                    l[j] = 1 - 2 * l[j];
+            }
+            for (int j = 0; j < 3; j++)
+                l[j] = l[j] < 0 ? 0 : l[j];
+            i = nd->child + (uint32_t)k;
+            nd = &nodes[i];
+        }
+        double sum = l[0] + l[1] + l[2];
+        w[0] = l[0] / sum;
+        w[1] = l[1] / sum;
+        w[2] = l[2] / sum;
+        w[3] = 0;
+        return i;
+    }
+    double u, v;
+    inverse_bilinear(nd, n, p, &u, &v);
+    while (nd->child != RP_NONE) {
+        int hu = u >= 0.5, hv = v >= 0.5;
+        static const int child_of[2][2] = {{0, 3}, {1, 2}}; /* [hu][hv] */
+        u = hu ? 2 * u - 1 : 2 * u;
+        v = hv ? 2 * v - 1 : 2 * v;
+        i = nd->child + (uint32_t)child_of[hu][hv];
+        nd = &nodes[i];
+    }
+    w[0] = (1 - u) * (1 - v);
+    w[1] = u * (1 - v);
+    w[2] = u * v;
+    w[3] = (1 - u) * v;
+    return i;
+}
+
+size_t hier_bytes(const hier_state *s)
+{
+    size_t b = s->cap_nodes * (sizeof(hier_node) + 3 * s->nb * sizeof(double));
+    b += s->cap_links * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
+    b += s->nfaces * sizeof(hier_face);
+    if (s->cull)
+        b += s->nfaces * s->nfaces * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t);
+    return b;
+}

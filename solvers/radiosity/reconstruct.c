@@ -1,0 +1,302 @@
+/* Answers from an element radiosity solution: surface averages and images
+ * (reconstruct.h). */
+#include "reconstruct.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../geometry/camera.h"
+
+/* Small per-ray band arrays live on the stack (the solvers refuse more). */
+#define RECON_MAX_BANDS 256
+
+rp_status rp_recon_mode_parse(const char *name, rp_recon_mode *out, rp_error *err)
+{
+    static const char *names[] = {"flat", "gouraud", "gather"};
+    for (int m = 0; m < 3; m++)
+        if (strcmp(name, names[m]) == 0) {
+            *out = (rp_recon_mode)m;
+            return RP_OK;
+        }
+    return rp_error_set(err, RP_ERR_INPUT, "--reconstruct: '%s' is not flat, gouraud or gather", name);
+}
+
+const char *rp_recon_mode_name(rp_recon_mode m)
+{
+    switch (m) {
+    case RP_RECON_FLAT: return "flat";
+    case RP_RECON_GOURAUD: return "gouraud";
+    case RP_RECON_GATHER: return "gather";
+    }
+    return "?";
+}
+
+void rp_recon_surfaces(const rp_scene *scene, const rp_mesh *mesh, size_t nb, const double *B,
+                       double *out)
+{
+    const rp_element *el = rp_mesh_elements(mesh);
+    size_t ns = rp_scene_nsurfaces(scene);
+    for (size_t s = 0; s < ns; s++) {
+        uint32_t first, count;
+        rp_mesh_surface_elements(mesh, (uint32_t)s, &first, &count);
+        double area = 0;
+        double *o = out + s * nb;
+        for (size_t b = 0; b < nb; b++)
+            o[b] = 0;
+        for (uint32_t e = first; e < first + count; e++) {
+            area += el[e].area;
+            for (size_t b = 0; b < nb; b++)
+                o[b] += el[e].area * B[(size_t)e * nb + b];
+        }
+        /* Outgoing radiance of a Lambertian surface is B / pi. */
+        for (size_t b = 0; b < nb; b++)
+            o[b] = area > 0 ? o[b] / (area * RP_PI) : 0;
+    }
+}
+
+void rp_recon_vertices(const rp_mesh *mesh, size_t nb, const double *B, double *out)
+{
+    const rp_element *el = rp_mesh_elements(mesh);
+    size_t nv = rp_mesh_nvertices(mesh);
+    for (size_t v = 0; v < nv; v++) {
+        size_t cnt;
+        const uint32_t *inc = rp_mesh_vertex_elements(mesh, (uint32_t)v, &cnt);
+        double *o = out + v * nb, area = 0;
+        for (size_t b = 0; b < nb; b++)
+            o[b] = 0;
+        for (size_t k = 0; k < cnt; k++) {
+            const rp_element *e = &el[inc[k]];
+            area += e->area;
+            for (size_t b = 0; b < nb; b++)
+                o[b] += e->area * B[(size_t)inc[k] * nb + b];
+        }
+        for (size_t b = 0; b < nb; b++)
+            o[b] = area > 0 ? o[b] / area : 0;
+    }
+}
+
+/* Counter-based random numbers: a pure function of (seed, stream, index,
+ * dimension), so no pixel's value depends on which thread computed it.
+ * splitmix64's output function (Steele, Lea & Flood 2014) as the mixer. */
+static inline uint64_t recon_mix(uint64_t z)
+{
+    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
+    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
+    return z ^ (z >> 31);
+}
+
+static inline uint64_t recon_key(uint64_t seed, uint64_t a, uint64_t b)
+{
+    return recon_mix(recon_mix(recon_mix(seed ^ UINT64_C(0x7ad10517c0ffee)) ^ a) + b);
+}
+
+/* A uniform number in [0, 1) for dimension d of a key. */
+static inline double recon_u01(uint64_t key, uint64_t d)
+{
+    return (double)(recon_mix(key + (d + 1) * UINT64_C(0x9e3779b97f4a7c15)) >> 11) * 0x1.0p-53;
+}
+
+/* Stratified positions of n samples in the unit square: a jittered
+ * sqrt(n) x sqrt(n) grid when n is a square, otherwise n-rooks (one sample
+ * per row and per column, columns permuted), both unbiased for the box
+ * filter.  perm has room for n (used for n-rooks only). */
+static void recon_strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
+{
+    unsigned m = (unsigned)floor(sqrt((double)n) + 0.5);
+    if (m * m == n) {
+        for (unsigned k = 0; k < n; k++) {
+            xy[2 * k] = ((k % m) + recon_u01(key, 2 * (uint64_t)k)) / m;
+            xy[2 * k + 1] = ((k / m) + recon_u01(key, 2 * (uint64_t)k + 1)) / m;
+        }
+        return;
+    }
+    for (unsigned k = 0; k < n; k++)
+        perm[k] = k;
+    for (unsigned k = n; k > 1; k--) { /* Fisher-Yates */
+        unsigned j = (unsigned)(recon_u01(key, 2 * (uint64_t)n + k) * k);
+        if (j >= k)
+            j = k - 1;
+        uint32_t t = perm[k - 1];
+        perm[k - 1] = perm[j];
+        perm[j] = t;
+    }
+    for (unsigned k = 0; k < n; k++) {
+        xy[2 * k] = (perm[k] + recon_u01(key, 2 * (uint64_t)k)) / n;
+        xy[2 * k + 1] = (k + recon_u01(key, 2 * (uint64_t)k + 1)) / n;
+    }
+}
+
+typedef struct recon_job {
+    const rp_scene *scene;
+    const rp_mesh *mesh;
+    const rp_element *el;
+    const rp_raycast *rc;
+    const rp_recon_params *p;
+    size_t nb;
+    const double *B;        /* elements x nb */
+    const double *VB;       /* vertices x nb (gouraud) */
+    const rp_material **elmat; /* per element */
+} recon_job;
+
+/* Radiance leaving the front of the element hit towards the camera. */
+static void recon_shade(const recon_job *j, const rp_hit *h, uint64_t key, double *xy_gather,
+                        uint32_t *perm, double *L, unsigned long long *rays)
+{
+    const size_t nb = j->nb;
+    uint32_t e = h->element;
+    for (size_t b = 0; b < nb; b++)
+        L[b] = 0;
+    if (!h->front || e == RP_NONE)
+        return; /* the back of a face is black */
+    switch (j->p->mode) {
+    case RP_RECON_FLAT:
+        for (size_t b = 0; b < nb; b++)
+            L[b] = j->B[(size_t)e * nb + b] / RP_PI;
+        return;
+    case RP_RECON_GOURAUD: {
+        double w[4];
+        rp_mesh_element_weights(j->mesh, e, h->p, w);
+        const rp_element *el = &j->el[e];
+        for (uint32_t k = 0; k < el->nverts; k++)
+            for (size_t b = 0; b < nb; b++)
+                L[b] += w[k] * j->VB[(size_t)el->v[k] * nb + b];
+        for (size_t b = 0; b < nb; b++)
+            L[b] /= RP_PI;
+        return;
+    }
+    case RP_RECON_GATHER: {
+        /* L = Le + rho/pi E, E = int L_in cos dw ~ (pi/G) sum L_in =
+         * (1/G) sum B_hit for cosine-distributed directions (pdf cos/pi). */
+        const rp_material *m = j->elmat[e];
+        const unsigned G = j->p->gather_rays;
+        double acc[RECON_MAX_BANDS];
+        for (size_t b = 0; b < nb; b++)
+            acc[b] = 0;
+        recon_strata(key, G, perm, xy_gather);
+        rp_vec3 t, bt;
+        rp_v3_basis(h->n, &t, &bt);
+        for (unsigned k = 0; k < G; k++) {
+            double u1 = xy_gather[2 * k], u2 = xy_gather[2 * k + 1];
+            double r = sqrt(u1), phi = 2.0 * RP_PI * u2, c = sqrt(1.0 - u1);
+            rp_vec3 wi = rp_v3_madd(rp_v3_madd(rp_v3_scale(h->n, c), t, r * cos(phi)), bt, r * sin(phi));
+            rp_hit g;
+            (*rays)++;
+            if (!rp_ray_closest_from(j->rc, h->p, h->n, wi, &g) || !g.front || g.element == RP_NONE)
+                continue;
+            for (size_t b = 0; b < nb; b++)
+                acc[b] += j->B[(size_t)g.element * nb + b];
+        }
+        for (size_t b = 0; b < nb; b++)
+            L[b] = m->Le[b] + m->rho[b] / RP_PI * acc[b] / G;
+        return;
+    }
+    }
+}
+
+rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_raycast *rc,
+                         const rp_recon_params *p, size_t nb, const double *B, float *out,
+                         float *variance, double *rays, rp_error *err)
+{
+    const rp_camera *cam = rp_scene_camera(scene);
+    if (!cam)
+        return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
+    if (nb == 0 || nb > RECON_MAX_BANDS)
+        return rp_error_set(err, RP_ERR_UNSUPPORTED, "%zu bands (at most %d)", nb, RECON_MAX_BANDS);
+    if (p->spp == 0 || (p->mode == RP_RECON_GATHER && p->gather_rays == 0))
+        return rp_error_set(err, RP_ERR_INPUT, "no camera or gather rays asked for");
+    rp_camera_frame frame;
+    rp_camera_frame_init(&frame, cam);
+
+    const size_t n = rp_mesh_nelements(mesh);
+    recon_job job = {.scene = scene, .mesh = mesh, .el = rp_mesh_elements(mesh), .rc = rc,
+                     .p = p, .nb = nb, .B = B};
+    double *VB = NULL;
+    const rp_material **elmat = NULL;
+    if (p->mode == RP_RECON_GOURAUD) {
+        size_t nv = rp_mesh_nvertices(mesh);
+        VB = malloc((nv ? nv : 1) * nb * sizeof *VB);
+        if (!VB)
+            return rp_error_set(err, RP_ERR_NOMEM, "out of memory for vertex radiosities");
+        rp_recon_vertices(mesh, nb, B, VB);
+        job.VB = VB;
+    }
+    if (p->mode == RP_RECON_GATHER) {
+        elmat = malloc((n ? n : 1) * sizeof *elmat);
+        if (!elmat)
+            return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+        const rp_material *mats = rp_scene_materials(scene);
+        const rp_surface *surfs = rp_scene_surfaces(scene);
+        for (size_t e = 0; e < n; e++)
+            elmat[e] = &mats[surfs[job.el[e].surface].material];
+        job.elmat = elmat;
+    }
+
+    const uint32_t W = cam->width, H = cam->height;
+    const unsigned spp = p->spp;
+    const unsigned G = p->mode == RP_RECON_GATHER ? p->gather_rays : 1;
+    const unsigned nperm = spp > G ? spp : G;
+    unsigned long long nrays = 0;
+    int failed = 0;
+
+#pragma omp parallel num_threads(p->threads) reduction(+ : nrays)
+    {
+        double *xy = malloc(2 * (size_t)spp * sizeof *xy);
+        double *xyg = malloc(2 * (size_t)G * sizeof *xyg);
+        uint32_t *perm = malloc((size_t)nperm * sizeof *perm);
+        if (!xy || !xyg || !perm) {
+#pragma omp atomic write
+            failed = 1;
+        }
+        /* Every thread takes part in the loop (a worksharing construct
+         * must be met by all); one without scratch skips its rows. */
+#pragma omp for schedule(dynamic, 1)
+        for (long y = 0; y < (long)H; y++) {
+            if (!xy || !xyg || !perm)
+                continue;
+            double L[RECON_MAX_BANDS], sum[RECON_MAX_BANDS], sq[RECON_MAX_BANDS];
+            for (uint32_t x = 0; x < W; x++) {
+                uint64_t pix = (uint64_t)y * W + x;
+                uint64_t pkey = recon_key(p->seed, pix, 0);
+                recon_strata(pkey, spp, perm, xy);
+                for (size_t b = 0; b < nb; b++)
+                    sum[b] = sq[b] = 0;
+                for (unsigned k = 0; k < spp; k++) {
+                    rp_vec3 d = rp_camera_direction(&frame, x + xy[2 * k], (double)y + xy[2 * k + 1]);
+                    rp_hit h;
+                    nrays++;
+                    if (!rp_ray_closest(rc, frame.eye, d, INFINITY, &h))
+                        continue; /* a miss is black */
+                    recon_shade(&job, &h, recon_key(p->seed, pix, (uint64_t)k + 1), xyg, perm, L, &nrays);
+                    for (size_t b = 0; b < nb; b++) {
+                        sum[b] += L[b];
+                        sq[b] += L[b] * L[b];
+                    }
+                }
+                float *o = out + pix * nb;
+                for (size_t b = 0; b < nb; b++)
+                    o[b] = (float)(sum[b] / spp);
+                if (variance) {
+                    /* Sample variance / spp (stratification makes it an
+                     * overestimate); infinite from a single sample. */
+                    float *v = variance + pix * nb;
+                    for (size_t b = 0; b < nb; b++) {
+                        double var = spp > 1 ? (sq[b] - sum[b] * sum[b] / spp) / (spp - 1) / spp : INFINITY;
+                        v[b] = (float)(var > 0 ? var : 0);
+                    }
+                }
+            }
+        }
+        free(xy);
+        free(xyg);
+        free(perm);
+    }
+    free(VB);
+    free(elmat);
+    if (failed)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory for image scratch");
+    if (rays)
+        *rays += (double)nrays;
+    return RP_OK;
+}

@@ -1,0 +1,69 @@
+/* From an element radiosity solution to the common space (solver.h): the
+ * area-averaged radiance of each surface, and a camera image.
+ *
+ * The image is filtered exactly as the path tracer's: spp camera rays
+ * spread over each pixel (box filter, stratified jitter that depends only on
+ * (seed, pixel, sample)), through the shared pinhole camera (camera.h).  A
+ * ray that hits the front of a face sees outgoing radiance L = B / pi,
+ * reconstructed one of three ways (Cohen & Wallace 1993, ch. 9):
+ *
+ *   flat     B of the element hit;
+ *   gouraud  B at the element's vertices (the area-weighted mean of the
+ *            incident elements of the same surface), interpolated with
+ *            rp_mesh_element_weights;
+ *   gather   one bounce of final gathering: L = Le + rho/pi E(x), with the
+ *            irradiance E(x) estimated from cosine-distributed rays, each
+ *            seeing the flat B of the element it hits (E = pi * mean of
+ *            L_in = mean of B_hit for cosine-weighted directions).
+ *
+ * Backs of faces and misses are black.  Every pixel's value is a pure
+ * function of (seed, pixel), so images are identical for any thread count. */
+#ifndef RP_RAD_RECONSTRUCT_H
+#define RP_RAD_RECONSTRUCT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../../geometry/mesh.h"
+#include "../../geometry/raycast.h"
+#include "../../geometry/scene.h"
+
+typedef enum rp_recon_mode {
+    RP_RECON_FLAT,
+    RP_RECON_GOURAUD,
+    RP_RECON_GATHER
+} rp_recon_mode;
+
+typedef struct rp_recon_params {
+    rp_recon_mode mode;
+    unsigned spp;          /* camera rays per pixel, >= 1 */
+    unsigned gather_rays;  /* gather: rays per camera ray, >= 1 */
+    uint64_t seed;
+    int threads;           /* > 0 */
+} rp_recon_params;
+
+/* Parses "flat" | "gouraud" | "gather". */
+rp_status rp_recon_mode_parse(const char *name, rp_recon_mode *out, rp_error *err);
+const char *rp_recon_mode_name(rp_recon_mode m);
+
+/* Area-weighted mean of B / pi over each surface's elements:
+ * out[surface * nb + b].  B is nelements x nb. */
+void rp_recon_surfaces(const rp_scene *scene, const rp_mesh *mesh, size_t nb, const double *B,
+                       double *out);
+
+/* Radiosity at each mesh vertex (nvertices x nb): the area-weighted mean of
+ * B over the elements incident to it (they all lie on one surface, since
+ * vertices are shared within a surface only). */
+void rp_recon_vertices(const rp_mesh *mesh, size_t nb, const double *B, double *out);
+
+/* The camera image, width x height x nb radiance (row-major from the
+ * top-left, band fastest), into out; variance (may be NULL) gets the
+ * variance of each pixel mean, estimated from its spp camera samples.  rc
+ * must have been built with mesh.  *rays (may be NULL) gets the rays cast
+ * added.  RP_ERR_INPUT without a camera, RP_ERR_NOMEM if scratch memory
+ * runs out. */
+rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_raycast *rc,
+                         const rp_recon_params *p, size_t nb, const double *B, float *out,
+                         float *variance, double *rays, rp_error *err);
+
+#endif

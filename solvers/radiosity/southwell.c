@@ -1,0 +1,412 @@
+/* Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988),
+ * registered as "southwell": a step is one shot.  The element i with the
+ * most unshot power A_i |dB_i| shoots it to every element j,
+ *
+ *     dB_j += rho_j F_ji w dB_i,
+ *
+ * which needs only column i of F, computed when needed: no n x n matrix is
+ * ever stored.  This is Southwell relaxation of B = E + rho F B (Gortler,
+ * Cohen & Slusallek 1994), the residual kept as the unshot radiosity dB.
+ *
+ * The column.  Analytic and Monte Carlo form factors give F_ji pair by
+ * pair (rp_ff_pair, the same value as row j of the gathering solvers), so
+ * the column is computed directly, in parallel over j, and southwell solves
+ * exactly the system jacobi and gauss-seidel solve.  The hemicube gives
+ * whole rows from i only, so the column comes from reciprocity,
+ * F_ji = F_ij A_i / A_j, as in the 1988 paper; reciprocity holds for the
+ * hemicube only to its aliasing error, so there the system differs
+ * slightly.  (For analytic form factors with ray visibility, reciprocity is
+ * met to ~1e-7 for unoccluded pairs but only to ~1e-3 relative where
+ * visibility is partial: not good enough to replace the column.)
+ *
+ * Options:
+ *   --ambient      answers show B + rho * ambient, the unshot power spread
+ *                  uniformly and interreflected with the area-mean
+ *                  reflectance: ambient = R sum_j A_j dB_j / sum_j A_j,
+ *                  R = 1 / (1 - rho_avg) (Cohen et al. 1988, sec. 4).
+ *                  The iteration itself is unchanged.
+ *   --overshoot W  shoots W times the unshot radiosity, leaving (1 - W) dB_i
+ *                  unshot (negative for W > 1): over-relaxed Southwell
+ *                  (overshooting, Feda & Purgathofer 1992; relaxation
+ *                  factors analysed by Gortler et al. 1994).  W = 1 is the
+ *                  classic method.
+ *
+ * Residual.  The current B satisfies E + rho F B - B = rho F dB exactly, so
+ * in the power norm ||r||_b <= sum_i A_i |dB_ib| k_ib with
+ * k_ib = sum_j A_j rho_jb F_ji / A_i, known exactly once column i has been
+ * computed, and bounded by rho_max_b C before (C = max(1, largest
+ * sum_j A_j F_ji / A_i seen), about 1 by reciprocity and closure).  The
+ * reported residual is this bound over the emitted power (worst band): an
+ * upper bound on the relative residual the gathering solvers report
+ * exactly, at no extra form factors.
+ *
+ * Columns are kept in a cache of bounded size (--row-cache) that evicts the
+ * column of the element with the least unshot power.  The shooting order never depends on the cache or the
+ * thread count, so results are the same for any of them. */
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "system.h"
+
+typedef struct sw_state {
+    rp_rad_system sys;
+    double *U;          /* n x nb unshot radiosity */
+    double *power;      /* n: A_i sum_b |U_ib| */
+    int ambient;
+    double overshoot;
+    double rho_avg[RP_RAD_MAX_BANDS];
+    double total_area;
+    double closure;     /* max over computed columns of sum_j A_j F_ji / A_i */
+    double *reflect;    /* n x nb: sum_j A_j rho_jb F_ji / A_i once column i was
+                           computed, -1 before */
+    int by_rows;        /* columns from rows by reciprocity (hemicube) */
+
+    /* Column cache over sys.rowbuf. */
+    size_t nslots;
+    int32_t *slot_of;   /* n: slot holding column i, or -1 */
+    uint32_t *col_in;   /* nslots: column held, or RP_NONE */
+    uint64_t *used;     /* nslots: last use, for LRU */
+    uint64_t clock;
+    size_t batch_max;   /* columns computed together on a miss */
+    uint32_t *batch;    /* batch_max: columns computed together */
+    int32_t *batch_slot;
+} sw_state;
+
+static const rp_option_spec sw_options[] = {
+    RP_RAD_MESH_OPTIONS,
+    RP_RAD_SOLVE_OPTIONS,
+    {"max-iterations", "N", "stop after N shots", "100 x the element count"},
+    {"ambient", NULL, "show the ambient term (unshot power spread uniformly) in the answers", NULL},
+    {"overshoot", "W", "shoot W times the unshot radiosity, W in [1, 2); 1 is classic shooting", "1"},
+    {"row-cache", "MIB", "memory for cached form-factor columns (at least one per thread)", "16"},
+    RP_RAD_IMAGE_OPTIONS,
+    {NULL, NULL, NULL, NULL}
+};
+
+static void sw_fini(void *state)
+{
+    sw_state *s = state;
+    rp_rad_system_fini(&s->sys);
+    free(s->U);
+    free(s->power);
+    free(s->reflect);
+    free(s->slot_of);
+    free(s->col_in);
+    free(s->used);
+    free(s->batch);
+    free(s->batch_slot);
+    memset(s, 0, sizeof *s);
+}
+
+static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
+{
+    sw_state *s = state;
+    rp_status st;
+    double cache_mib = 16;
+    if ((st = rp_options_double(o, "row-cache", 0, 1 << 20, &cache_mib, err)) != RP_OK)
+        return st;
+    s->overshoot = 1;
+    if ((st = rp_options_double(o, "overshoot", 1, 2, &s->overshoot, err)) != RP_OK)
+        return st;
+    if (!(s->overshoot < 2))
+        return rp_error_set(err, RP_ERR_INPUT, "--overshoot: %g is not below 2", s->overshoot);
+    s->ambient = rp_options_get(o, "ambient") != NULL;
+    rp_rad_config cfg = {.name = "southwell", .storage_option = 0, .storage = RP_RAD_STORAGE_ROWS,
+                         .default_max_iterations = 0,
+                         /* 0 MiB still keeps one column per thread */
+                         .row_bytes = cache_mib > 0 ? (size_t)(cache_mib * 1024 * 1024) : 1};
+    rp_rad_system *sys = &s->sys;
+    if ((st = rp_rad_system_init(sys, &cfg, scene, o, err)) != RP_OK)
+        return st;
+    const size_t n = sys->n, nb = sys->nb;
+    s->by_rows = sys->ffp.method == RP_FF_HEMICUBE;
+    s->nslots = sys->rowbuf_rows;
+    s->U = malloc(n * nb * sizeof *s->U);
+    s->power = malloc(n * sizeof *s->power);
+    s->reflect = malloc(n * nb * sizeof *s->reflect);
+    s->slot_of = malloc(n * sizeof *s->slot_of);
+    s->col_in = malloc(s->nslots * sizeof *s->col_in);
+    s->used = calloc(s->nslots, sizeof *s->used);
+    /* A few columns per thread per miss, at most half the cache. */
+    s->batch_max = 4 * (size_t)sys->threads;
+    if (s->batch_max > s->nslots / 2)
+        s->batch_max = s->nslots / 2 > 0 ? s->nslots / 2 : 1;
+    s->batch = malloc(s->batch_max * sizeof *s->batch);
+    s->batch_slot = malloc(s->batch_max * sizeof *s->batch_slot);
+    if (!s->U || !s->power || !s->reflect || !s->slot_of || !s->col_in || !s->used || !s->batch || !s->batch_slot)
+        return rp_error_set(err, RP_ERR_NOMEM, "southwell: out of memory");
+    sys->bytes += 2 * n * nb * sizeof *s->U + n * (sizeof *s->power + sizeof *s->slot_of) +
+                  s->nslots * (sizeof *s->col_in + sizeof *s->used);
+    for (size_t i = 0; i < n; i++)
+        s->slot_of[i] = -1;
+    for (size_t k = 0; k < n * nb; k++)
+        s->reflect[k] = -1;
+    for (size_t k = 0; k < s->nslots; k++)
+        s->col_in[k] = RP_NONE;
+    /* Everything emitted is unshot at first. */
+    memcpy(s->U, sys->E, n * nb * sizeof *s->U);
+    s->total_area = 0;
+    for (size_t b = 0; b < nb; b++)
+        s->rho_avg[b] = 0;
+    for (size_t i = 0; i < n; i++) {
+        double p = 0;
+        for (size_t b = 0; b < nb; b++) {
+            p += fabs(s->U[i * nb + b]);
+            s->rho_avg[b] += sys->area[i] * sys->rho[i * nb + b];
+        }
+        s->power[i] = sys->area[i] * p;
+        s->total_area += sys->area[i];
+    }
+    for (size_t b = 0; b < nb; b++)
+        s->rho_avg[b] /= s->total_area;
+    return RP_OK;
+}
+
+/* The slot to reuse, among those not taken by the first `taken` entries
+ * of the current batch: the one whose element has the least unshot power
+ * (the shooting order reaches it last, so this approximates evicting the
+ * column needed furthest in the future; plain LRU thrashes once shooting
+ * cycles through more elements than the cache holds), least recently used
+ * among equals.  Empty slots first. */
+static int32_t sw_victim(const sw_state *s, size_t taken)
+{
+    int32_t best = -1;
+    double best_power = 0;
+    for (size_t k = 0; k < s->nslots; k++) {
+        int busy = 0;
+        for (size_t t = 0; t < taken; t++)
+            if (s->batch_slot[t] == (int32_t)k)
+                busy = 1;
+        if (busy)
+            continue;
+        double p = s->col_in[k] == RP_NONE ? -1 : s->power[s->col_in[k]];
+        if (best < 0 || p < best_power || (p == best_power && s->used[k] < s->used[best])) {
+            best = (int32_t)k;
+            best_power = p;
+        }
+    }
+    return best;
+}
+
+/* Puts column i (and, batched with it, others) into cache slots. */
+static void sw_assign(sw_state *s, size_t m)
+{
+    for (size_t t = 0; t < m; t++) {
+        int32_t k = sw_victim(s, t);
+        s->batch_slot[t] = k;
+        if (s->col_in[k] != RP_NONE)
+            s->slot_of[s->col_in[k]] = -1;
+        s->col_in[k] = s->batch[t];
+        s->slot_of[s->batch[t]] = k;
+        s->used[k] = ++s->clock;
+    }
+}
+
+/* Column i of F (F_ji for every j), from the cache or computed.  A miss
+ * computes i's column together with those of the next largest uncached
+ * shooters (they are about to be needed): one parallel region per batch
+ * rather than per column keeps the threads busy on a loaded machine. */
+static const float *sw_column(sw_state *s, uint32_t i, rp_step_info *info)
+{
+    rp_rad_system *sys = &s->sys;
+    const size_t n = sys->n;
+    if (s->slot_of[i] < 0) {
+        size_t K = s->batch_max < s->nslots ? s->batch_max : s->nslots;
+        size_t m = 0;
+        s->batch[m++] = i;
+        while (m < K) {
+            uint32_t best = RP_NONE;
+            for (size_t j = 0; j < n; j++) {
+                if (s->slot_of[j] >= 0 || !(s->power[j] > 0))
+                    continue;
+                int in = 0;
+                for (size_t t = 0; t < m; t++)
+                    in |= s->batch[t] == j;
+                if (!in && (best == RP_NONE || s->power[j] > s->power[best]))
+                    best = (uint32_t)j;
+            }
+            if (best == RP_NONE)
+                break;
+            s->batch[m++] = best;
+        }
+        sw_assign(s, m);
+        double rays = 0, ff = 0;
+        if (!s->by_rows) {
+            /* F_ji pair by pair: the same values as row j. */
+            const long total = (long)(m * n);
+#pragma omp parallel for num_threads(sys->threads) schedule(dynamic, 64) reduction(+ : rays)
+            for (long q = 0; q < total; q++) {
+                size_t t = (size_t)q / n, j = (size_t)q % n;
+                float *col = sys->rowbuf + (size_t)s->batch_slot[t] * n;
+                col[j] = (float)rp_ff_pair(sys->ff, sys->scratch[omp_get_thread_num()], (uint32_t)j,
+                                           s->batch[t], NULL, &rays);
+            }
+            ff = (double)total;
+        } else {
+            /* Whole rows only (hemicube): F_ji = F_ij A_i / A_j. */
+#pragma omp parallel for num_threads(sys->threads) schedule(dynamic, 1) reduction(+ : rays, ff)
+            for (long t = 0; t < (long)m; t++) {
+                uint32_t r = s->batch[t];
+                float *buf = sys->rowbuf + (size_t)s->batch_slot[t] * n;
+                rp_rad_row(sys, r, sys->scratch[omp_get_thread_num()], buf, &ff, &rays);
+                for (size_t j = 0; j < n; j++)
+                    buf[j] = (float)((double)buf[j] * sys->area[r] / sys->area[j]);
+            }
+        }
+        info->rays += rays;
+        info->form_factors += ff;
+    }
+    int32_t k = s->slot_of[i];
+    s->used[k] = ++s->clock;
+    return sys->rowbuf + (size_t)k * n;
+}
+
+/* Refuses a column that would make shooting diverge: the power i sends
+ * out, reflected, must be less than it had, sum_j A_j rho_jb F_ji < A_i
+ * (Cohen & Wallace 1993, sec. 5.3); negative or non-finite entries are
+ * bugs.  *closure gets sum_j A_j F_ji / A_i. */
+static rp_status sw_check_column(sw_state *s, uint32_t i, const float *col, double *closure,
+                                 rp_error *err)
+{
+    const rp_rad_system *sys = &s->sys;
+    const size_t n = sys->n, nb = sys->nb;
+    double sum = 0, shot[RP_RAD_MAX_BANDS];
+    for (size_t b = 0; b < nb; b++)
+        shot[b] = 0;
+    int bad = 0;
+    for (size_t j = 0; j < n; j++) {
+        double f = col[j];
+        if (!(f >= 0) || !isfinite(f))
+            bad = 1;
+        double w = sys->area[j] * f;
+        sum += w;
+        for (size_t b = 0; b < nb; b++)
+            shot[b] += sys->rho[j * nb + b] * w;
+    }
+    const double Ai = sys->area[i];
+    *closure = sum / Ai;
+    for (size_t b = 0; b < nb; b++)
+        s->reflect[(size_t)i * nb + b] = shot[b] / Ai;
+    if (bad)
+        return rp_error_set(err, RP_ERR_RUNTIME, "southwell: form factors to element %u are negative or not finite",
+                            i);
+    const rp_element *el = rp_mesh_elements(sys->mesh);
+    for (size_t b = 0; b < nb; b++)
+        if (shot[b] >= Ai)
+            return rp_error_set(err, RP_ERR_INPUT,
+                                "southwell: element %u of surface '%s', band %zu: the power it shoots comes back "
+                                "multiplied by %.9g >= 1 (form factors sum to %.9g): the radiosity system would "
+                                "be singular or divergent; use more accurate form factors (--ff)",
+                                i, rp_scene_surfaces(sys->scene)[el[i].surface].name, b, shot[b] / Ai,
+                                sum / Ai);
+    return RP_OK;
+}
+
+static rp_status sw_step(void *state, rp_step_info *info, rp_error *err)
+{
+    sw_state *s = state;
+    rp_rad_system *sys = &s->sys;
+    const size_t n = sys->n, nb = sys->nb;
+    rp_status st;
+
+    uint32_t i = 0;
+    for (size_t j = 1; j < n; j++)
+        if (s->power[j] > s->power[i])
+            i = (uint32_t)j;
+    if (s->power[i] > 0) {
+        const float *col = sw_column(s, i, info);
+        double closure;
+        if ((st = sw_check_column(s, i, col, &closure, err)) != RP_OK)
+            return st;
+        if (closure > s->closure)
+            s->closure = closure;
+        double d[RP_RAD_MAX_BANDS];
+        for (size_t b = 0; b < nb; b++)
+            d[b] = s->overshoot * s->U[(size_t)i * nb + b];
+        for (size_t j = 0; j < n; j++) {
+            double f = col[j];
+            if (f == 0)
+                continue;
+            double p = 0;
+            for (size_t b = 0; b < nb; b++) {
+                double delta = sys->rho[j * nb + b] * f * d[b];
+                sys->B[j * nb + b] += delta;
+                s->U[j * nb + b] += delta;
+                p += fabs(s->U[j * nb + b]);
+            }
+            s->power[j] = sys->area[j] * p;
+        }
+        double p = 0;
+        for (size_t b = 0; b < nb; b++) {
+            double *u = &s->U[(size_t)i * nb + b];
+            *u = s->overshoot == 1 ? 0 : *u - d[b];
+            p += fabs(*u);
+        }
+        s->power[i] = sys->area[i] * p;
+    }
+
+    /* Unshot power per band and the residual bound (see the top). */
+    double unshot = 0, residual = 0;
+    double C = s->closure > 1 ? s->closure : 1;
+    for (size_t b = 0; b < nb; b++) {
+        double u = 0, r = 0;
+        for (size_t j = 0; j < n; j++) {
+            double a = sys->area[j] * fabs(s->U[j * nb + b]);
+            double k = s->reflect[j * nb + b];
+            u += a;
+            r += a * (k >= 0 ? k : sys->rho_max[b] * C);
+        }
+        if (sys->e_norm[b] > 0) {
+            u /= sys->e_norm[b];
+            r /= sys->e_norm[b];
+            if (u > unshot)
+                unshot = u;
+            if (r > residual)
+                residual = r;
+        }
+    }
+    rp_rad_step_done(sys, residual, info);
+    info->unshot = unshot;
+    return RP_OK;
+}
+
+static rp_status sw_estimate(const void *state, rp_estimate *e, rp_error *err)
+{
+    const sw_state *s = state;
+    const rp_rad_system *sys = &s->sys;
+    if (!s->ambient)
+        return rp_rad_estimate(sys, sys->B, e, err);
+    const size_t n = sys->n, nb = sys->nb;
+    double *Bd = malloc(n * nb * sizeof *Bd);
+    if (!Bd)
+        return rp_error_set(err, RP_ERR_NOMEM, "southwell: out of memory");
+    double ambient[RP_RAD_MAX_BANDS];
+    for (size_t b = 0; b < nb; b++) {
+        double u = 0;
+        for (size_t j = 0; j < n; j++)
+            u += sys->area[j] * s->U[j * nb + b];
+        /* Cohen et al. 1988, sec. 4: the area-mean unshot radiosity times
+         * the interreflection factor 1 / (1 - rho_avg). */
+        ambient[b] = u / s->total_area / (1 - s->rho_avg[b]);
+    }
+    for (size_t j = 0; j < n; j++)
+        for (size_t b = 0; b < nb; b++)
+            Bd[j * nb + b] = sys->B[j * nb + b] + sys->rho[j * nb + b] * ambient[b];
+    rp_status st = rp_rad_estimate(sys, Bd, e, err);
+    free(Bd);
+    return st;
+}
+
+const rp_solver_type rp_solver_southwell = {
+    .name = "southwell",
+    .summary = "finite-element radiosity, progressive refinement (shooting unshot power; "
+               "form factors on the fly, no matrix)",
+    .options = sw_options,
+    .state_size = sizeof(sw_state),
+    .init = sw_init,
+    .step = sw_step,
+    .estimate = sw_estimate,
+    .fini = sw_fini,
+};

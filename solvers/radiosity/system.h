@@ -1,0 +1,190 @@
+/* The state shared by the classic radiosity solvers (jacobi, gauss-seidel,
+ * southwell, direct): elements, materials, form factors and the current
+ * solution of the discrete radiosity system (Cohen & Wallace 1993, eq. 3.8)
+ *
+ *     B_i = E_i + rho_i sum_j F_ij B_j,   E_i = pi Le_i,   per band,
+ *
+ * plus the plumbing every such solver needs: option parsing, the storage
+ * decision for F (dense single-precision matrix or rows on the fly), the
+ * checks that refuse a divergent system, residual norms, the stopping rule
+ * and the answers in the common space (reconstruct.h).
+ *
+ * Not a public module: only solvers/radiosity/ (and its tests) include it.
+ * Every classic solver's state struct begins with an rp_rad_system, so a
+ * test holding the state can read the solution (tests/test_radiosity.c). */
+#ifndef RP_RAD_SYSTEM_H
+#define RP_RAD_SYSTEM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../../geometry/mesh.h"
+#include "../../geometry/raycast.h"
+#include "../../geometry/scene.h"
+#include "../solver.h"
+#include "formfactor.h"
+#include "reconstruct.h"
+
+/* A dense matrix is kept when n^2 * sizeof(float) is below this (auto). */
+#define RP_RAD_DENSE_CAP ((size_t)512 << 20)
+/* Per-element band arrays on the stack. */
+#define RP_RAD_MAX_BANDS 256
+
+typedef enum rp_rad_storage {
+    RP_RAD_STORAGE_AUTO,  /* dense below RP_RAD_DENSE_CAP, rows above */
+    RP_RAD_STORAGE_DENSE, /* the whole n x n matrix, float */
+    RP_RAD_STORAGE_ROWS   /* rows recomputed whenever they are needed */
+} rp_rad_storage;
+
+/* What a solver allows of the common options. */
+typedef struct rp_rad_config {
+    const char *name;       /* method name, for messages */
+    int storage_option;     /* the method reads --matrix */
+    int reciprocity_option; /* the method reads --reciprocity */
+    rp_rad_storage storage; /* forced storage when it does not */
+    unsigned long default_max_iterations; /* 0: 100 x the element count */
+    size_t row_bytes;       /* rows mode: memory for computed rows (0: a block
+                               of 64; at least one row per thread) */
+    size_t max_elements;    /* refuse meshes with more elements (0: no cap) */
+    const char *max_elements_why; /* the reason, for the message */
+} rp_rad_config;
+
+typedef struct rp_rad_system {
+    const char *name;
+    const rp_scene *scene;
+    size_t n, nb;
+    int threads;            /* > 0 */
+    unsigned want;
+    int open_ended;
+    rp_log_fn log;
+    void *log_ctx;
+
+    rp_mesh *mesh;
+    rp_raycast *rc;         /* built with the mesh: hits name elements */
+    rp_ff_context *ff;
+    rp_ff_params ffp;
+    rp_ff_scratch **scratch; /* one per thread */
+    float *rowbuf;          /* rowbuf_rows rows of n, for rows on the fly */
+    size_t rowbuf_rows;
+
+    int reciprocity;        /* dense F from pairs i < j, mirrored */
+    int dense;              /* F is stored */
+    float *F;               /* n x n, row-major, when dense and computed */
+    int matrix_ready;
+
+    double *area;           /* n */
+    double *rho;            /* n x nb */
+    double *E;              /* n x nb: emitted exitance pi Le */
+    double *B;              /* n x nb: the current iterate */
+    double *G;              /* n x nb: scratch for F B */
+    double e_norm[RP_RAD_MAX_BANDS];   /* sum_i A_i E_ib */
+    double rho_max[RP_RAD_MAX_BANDS];  /* max_i rho_ib */
+    double max_row_sum;     /* largest sum_j F_ij checked so far (dense: all rows) */
+
+    double tolerance;
+    int tolerance_given;
+    unsigned long max_iterations;
+    int max_iterations_given;
+    unsigned long iterations;
+    double residual;        /* after the last step, -1 before */
+
+    rp_recon_params recon;
+    size_t bytes;           /* memory the solver holds (arrays, matrix, buffers) */
+} rp_rad_system;
+
+#define RP_RAD_STR_(x) #x
+#define RP_RAD_STR(x) RP_RAD_STR_(x)
+
+/* Option specs every classic solver takes; a method's spec array lists
+ * these, then its own, then {NULL}. */
+#define RP_RAD_MESH_OPTIONS                                                                  \
+    {"elements", "N", "target element count for the whole scene (exclusive with --max-edge)", \
+     "1000"},                                                                                \
+    {"max-edge", "L", "target longest element edge in scene units (exclusive with --elements)", \
+     NULL},                                                                                  \
+    {"ff", "analytic|montecarlo|hemicube",                                                   \
+     "form factors: contour integral x ray visibility, area sampling, or hemicube",          \
+     "analytic"},                                                                            \
+    {"ff-samples", "N", "montecarlo form factors: point pairs per element pair", "256"},       \
+    {"ff-rays", "N",                                                                         \
+     "analytic form factors: visibility rays per element pair (default 4, 9 or 16, more for " \
+     "closer pairs; none where nothing can block)",                                         \
+     NULL},                                                                                  \
+    {"hemicube-resolution", "R", "hemicube form factors: pixels along the top face (even)", "256"}, \
+    {"ff-tolerance", "EPS", "analytic form factors: relative error goal per element pair",      \
+     RP_RAD_STR(RP_FF_DEFAULT_TOLERANCE)}
+
+#define RP_RAD_RECIPROCITY_OPTION                                                           \
+    {"reciprocity", NULL,                                                                    \
+     "dense matrix: compute each pair once and mirror it, A_i F_ij = A_j F_ji (half the work; " \
+     "analytic or montecarlo)",                                                              \
+     NULL}
+
+#define RP_RAD_SOLVE_OPTIONS                                                                  \
+    {"tolerance", "EPS",                                                                     \
+     "stop when the relative residual (power norm, worst band) falls to EPS", "1e-6"}
+
+#define RP_RAD_IMAGE_OPTIONS                                                                 \
+    {"reconstruct", "flat|gouraud|gather",                                                   \
+     "image: element value, vertex-interpolated values, or a one-bounce final gather",      \
+     "flat"},                                                                                \
+    {"spp", "N", "image: camera rays per pixel (stratified, box filter)", "16"},            \
+    {"gather-rays", "N", "image with --reconstruct gather: cosine-distributed rays per camera ray", \
+     "16"}
+
+/* Parses the common options, meshes the scene, builds the ray caster and the
+ * form-factor context and fills the material arrays.  B starts at E.  On
+ * failure the caller calls rp_rad_system_fini (which accepts a partly built
+ * system). */
+rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const rp_scene *scene,
+                             const rp_options *o, rp_error *err);
+void rp_rad_system_fini(rp_rad_system *s);
+
+/* Computes and checks the dense matrix if the system stores one and it is
+ * not there yet (in parallel over rows).  Adds form factors and rays cast to
+ * info. */
+rp_status rp_rad_system_matrix(rp_rad_system *s, rp_step_info *info, rp_error *err);
+
+/* Row i of F: the stored row, or computed into buf (n floats); adds the
+ * work to *ff and *rays when it computes.  A computed row is not checked:
+ * the caller passes it to rp_rad_check_row (cheap beside computing it). */
+const float *rp_rad_row(const rp_rad_system *s, uint32_t i, rp_ff_scratch *scratch, float *buf,
+                        double *ff, double *rays);
+
+/* Refuses a row that would make the iteration diverge: RP_ERR_INPUT when
+ * max_b rho_ib sum_j F_ij >= 1 (the Jacobi/Gauss-Seidel contraction in the
+ * max norm) or max_b sum_j rho_jb F_ij >= 1 (the shooting contraction in
+ * the power norm); RP_ERR_RUNTIME on a negative or non-finite entry.
+ * *row_sum gets sum_j F_ij. */
+rp_status rp_rad_check_row(const rp_rad_system *s, uint32_t i, const float *row, double *row_sum,
+                           rp_error *err);
+
+/* Y = F X (n x nb each), in parallel over rows; rows are computed (and
+ * checked) on the fly when F is not stored. */
+rp_status rp_rad_matvec(rp_rad_system *s, const double *X, double *Y, rp_step_info *info,
+                        rp_error *err);
+
+/* Relative residual of X: max over bands of
+ *   sum_i A_i |E_ib + rho_ib FX_ib - X_ib| / sum_i A_i E_ib
+ * given FX = F X (bands with no emission count only if X is non-zero). */
+double rp_rad_residual(const rp_rad_system *s, const double *X, const double *FX);
+
+/* Ends a step: records the residual and sets info->residual, ->converged,
+ * ->progress, ->iterations (adds one) and ->memory. */
+void rp_rad_step_done(rp_rad_system *s, double residual, rp_step_info *info);
+
+/* Answers from a solution Bd (n x nb, radiosity): surface averages and the
+ * image, as the caller's estimate asks. */
+rp_status rp_rad_estimate(const rp_rad_system *s, const double *Bd, rp_estimate *e, rp_error *err);
+
+/* The number of threads to use. */
+int rp_rad_threads(const rp_rad_system *s);
+
+/* Sends a formatted message to the log callback, if any. */
+void rp_rad_log(const rp_rad_system *s, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+
+#endif
