@@ -97,8 +97,8 @@ deps:
 demo: deps
 	@$(MAKE) --no-print-directory radpt meshes
 	./radpt info scenes/cornell.scene
-	@mkdir -p out
-	./radpt render scenes/cornell.scene --method pathtrace --spp 64 -o out/cornell.exr --png out/cornell.png
+	./radpt experiment cornell -o out/cornell
+	@echo "report: out/cornell/report.md"
 
 # Performance: the path tracer against the random-ray limit on the Cornell
 # box at 256 x 256, then the samplers at equal time.

@@ -8,5 +8,8 @@ int rp_cmd_probe(int argc, char **argv);
 int rp_cmd_formfactor(int argc, char **argv);
 int rp_cmd_throughput(int argc, char **argv);
 int rp_cmd_samplers(int argc, char **argv);
+int rp_cmd_reference(int argc, char **argv);
+int rp_cmd_bench(int argc, char **argv);
+int rp_cmd_experiment(int argc, char **argv);
 
 #endif

@@ -396,20 +396,32 @@ static rp_status exp_furnace(const rp_experiment_params *p, rp_error *err)
     char note[256] = "";
     if (st == RP_OK) {
         char body[4096];
-        snprintf(body, sizeof body,
-                 "\n@PNG\nset output 'furnace_time.png'\nset logscale y\nset format y '%%g'\n"
-                 "set xlabel 'reflectance rho (every surface)'\nset ylabel 'solver wall time to tolerance (s)'\n"
-                 "set title 'Furnace: time to reach relative error %g'\n"
-                 "plot for [i=0:%zu] 'furnace.dat' index i using 1:2 with linespoints lw 2 pt 7 "
-                 "title columnheader(1)\n@SVG\nset output 'furnace_time.svg'\nreplot\nunset output\n"
-                 "\n@PNG\nset output 'furnace_sweeps.png'\nset logscale y\n"
-                 "set ylabel 'sweeps to tolerance (southwell: shots / elements)'\n"
-                 "set title 'Furnace: sweeps to relative error %g against theory'\n"
-                 "plot for [i=0:2] 'furnace.dat' index i using 1:3 with linespoints lw 2 pt 7 title columnheader(1), "
-                 "'furnace.dat' index 0 using 1:4 with lines dt 2 lw 2 lc rgb '#555555' "
-                 "title 'Jacobi theory: ln(tol) / ln(rho) - 1'\n"
-                 "@SVG\nset output 'furnace_sweeps.svg'\nreplot\nunset output\n",
-                 tol, nm - 1, tol);
+        size_t used = (size_t)snprintf(body, sizeof body,
+                                       "\n@PNG\nset output 'furnace_time.png'\nset logscale y\n"
+                                       "set xlabel 'reflectance rho (every surface)'\n"
+                                       "set ylabel 'solver wall time to tolerance (s)'\n"
+                                       "set title 'Furnace: time to reach relative error %g'\nplot ",
+                                       tol);
+        for (size_t i = 0; i < nm && used < sizeof body; i++)
+            used += (size_t)snprintf(body + used, sizeof body - used,
+                                     "%s'furnace.dat' index %zu using 1:2 with linespoints lw 2 pt 7 title '%s'",
+                                     i ? ", " : "", i, specs[i]);
+        if (used < sizeof body)
+            used += (size_t)snprintf(body + used, sizeof body - used,
+                                     "\n@SVG\nset output 'furnace_time.svg'\nreplot\nunset output\n"
+                                     "\n@PNG\nset output 'furnace_sweeps.png'\n"
+                                     "set ylabel 'sweeps to tolerance (southwell: shots / elements)'\n"
+                                     "set title 'Furnace: sweeps to relative error %g against theory'\nplot ",
+                                     tol);
+        for (size_t i = 0; i < 3 && used < sizeof body; i++)
+            used += (size_t)snprintf(body + used, sizeof body - used,
+                                     "'furnace.dat' index %zu using 1:3 with linespoints lw 2 pt 7 title '%s', ", i,
+                                     specs[i]);
+        if (used < sizeof body)
+            snprintf(body + used, sizeof body - used,
+                     "'furnace.dat' index 0 using 1:4 with lines dt 2 lw 2 lc rgb '#555555' "
+                     "title 'Jacobi theory: ln(tol) / ln(rho) - 1'\n"
+                     "@SVG\nset output 'furnace_sweeps.svg'\nreplot\nunset output\n");
         st = draw(p, body, note, sizeof note, err);
     }
     if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "report.md"), err)) == RP_OK) {
@@ -728,10 +740,10 @@ static rp_status exp_meshing(const rp_experiment_params *p, rp_error *err)
         return st;
     /* below about 150 elements the Cornell box's 27 surfaces get one or two
      * elements each and the error is not yet in its asymptotic regime */
-    static const unsigned counts_full[] = {250, 500, 1000, 2000};
+    static const unsigned counts_full[] = {250, 500, 1000, 2000, 4000};
     static const unsigned counts_quick[] = {150, 300, 600};
     const unsigned *counts = p->quick ? counts_quick : counts_full;
-    size_t nc = p->quick ? 3 : 4;
+    size_t nc = p->quick ? 3 : 5;
     static const char *const recon[2] = {"flat", "gouraud"};
     const double budget = p->budget > 0 ? p->budget : (p->quick ? 20.0 : 300.0);
     rp_reference *ref = NULL;
@@ -781,7 +793,8 @@ static rp_status exp_meshing(const rp_experiment_params *p, rp_error *err)
                     w->seconds = cp->wall_s;
                     w->converged = cp->converged;
                 }
-                xlog(p, "  %zu elements, h %.4g: RMSE %.4g, surface error %.4g (%.1f s)", w->elements, w->h, cp->rmse,
+                xlog(p, "  %zu elements, h %.4g: RMSE %.4g, surface error %.4g (%.1f s)", w->elements, w->h,
+                     cp->rmse,
                      cp->surface_err, cp->wall_s);
             }
             rp_trial_free(&run);

@@ -89,7 +89,6 @@ rp_status rp_method_list_parse(const char *list, rp_method_spec **out, size_t *n
         while (*tok == ' ')
             tok++;
         st = rp_method_spec_parse(tok, &m[k], err);
-        /* keys/values point into the spec's own buffer: fix them after the copy */
         k += st == RP_OK;
     }
     free(copy);
@@ -425,7 +424,7 @@ void rp_bench_summarise(rp_bench *b)
                     x[n] = cp->wall_s;
                     xw[n] = cp->rays + cp->form_factors;
                     xs[n] = cp->samples;
-                    y[n++] = cp->rmse_debiased;
+                    y[n++] = cp->rmse;
                 }
         rp_fit_loglog(x, y, n, 0.95, &s->fit_time);
         rp_fit_loglog(xw, y, n, 0.95, &s->fit_work);
@@ -457,7 +456,7 @@ void rp_bench_summarise(rp_bench *b)
      * methods reach it and some do not. */
     double lo = INFINITY, hi = 0;
     for (size_t mi = 0; mi < b->nmethods; mi++) {
-        double e = b->summary[mi].final.rmse_debiased;
+        double e = b->summary[mi].final.rmse;
         if (isfinite(e) && e > 0) {
             lo = e < lo ? e : lo;
             hi = e > hi ? e : hi;
@@ -472,7 +471,7 @@ void rp_bench_summarise(rp_bench *b)
         if (t && e && isfinite(b->target)) {
             for (size_t i = 0; i < s->npts; i++) {
                 t[i] = s->pts[i].wall_s;
-                e[i] = s->pts[i].rmse_debiased;
+                e[i] = s->pts[i].rmse;
             }
             s->time_to_target = rp_metrics_time_to_error(t, e, s->npts, b->target, &s->target_before);
         }

@@ -62,10 +62,14 @@ typedef struct rp_checkpoint {
     double residual, unshot;
     double peak_rss_mb, solver_mb;
     double rmse, relmse, mae, surface_err;
-    /* sqrt(max(0, rmse^2 - reference RMSE standard error^2)): the reference
-     * is independent of the run, so E[(x - r)^2] = E[(x - L)^2] + Var(r),
-     * and subtracting the reference's estimated variance leaves an unbiased
-     * estimate of the mean squared error against the truth L. */
+    /* sqrt(max(0, rmse^2 - reference RMSE standard error^2)).  The
+     * reference r is independent of the run, so E[(x - r)^2] =
+     * E[(x - L)^2] + E[(r - L)^2] against the truth L: rmse overestimates
+     * the error against L by the reference's own error, and subtracting the
+     * reference's estimated variance removes it.  That estimate (sample
+     * variance / N) is exact for independent samples and an overestimate
+     * for scrambled Sobol' points, so for a Sobol' reference the error
+     * against the truth lies between rmse_debiased and rmse. */
     double rmse_debiased;
     double measure_s;     /* time the estimate and metrics took (not counted) */
     int ref_flag;         /* the reference's own error is not well below this one */
@@ -125,12 +129,10 @@ typedef struct rp_method_summary {
     rp_agg *pts;            /* by increasing time (decreasing k) */
     size_t npts;
     rp_agg final;           /* mean of each run's final row */
-    /* Fits and times below use the debiased RMSE. */
     rp_fit fit_time;        /* log RMSE against log wall time, every row */
     rp_fit fit_work;        /* ... against log (rays + form factors) */
     rp_fit fit_samples;     /* ... against log samples */
-    double time_to_target;  /* seconds to reach the target RMSE (mean curve of
-                               the debiased RMSE) */
+    double time_to_target;  /* seconds to reach the target RMSE (mean curve) */
     int target_before;      /* reached before the first checkpoint */
     size_t runs_ok, runs;
 } rp_method_summary;

@@ -18,6 +18,15 @@ static void print_usage(FILE *f)
           "  radpt probe SCENE --method M [method options] --surface-averages [--json]\n"
           "               [--seed S] [--threads T] [--time SECONDS]\n"
           "      area-averaged outgoing radiance of every surface, with standard errors\n"
+          "  radpt reference SCENE [--spp N] [--samples N] [--seed S] [--cache DIR] [--force] [--json]\n"
+          "      the converged answer runs are scored against: exact for a furnace, else a long\n"
+          "      path-traced render; cached as refs/<scenehash>-<optionshash>.exr and .json\n"
+          "  radpt bench SCENE [--methods M[:opt=v...],...] [--budget SECONDS] -o DIR [--seeds N]\n"
+          "               [--checkpoints N] [--target RMSE] [--surfaces] [--reference-spp N] [--cache DIR]\n"
+          "      each method with checkpoints at budget * 2^-k; DIR/report.md, runs.csv,\n"
+          "      summary.json and charts\n"
+          "  radpt experiment NAME [--quick] -o DIR [--budget SECONDS] [--seeds N] [--cache DIR]\n"
+          "      cornell, samplers, furnace, formfactors, meshing, progressive, hierarchy\n"
           "  radpt formfactor SCENE --from S --to S [--method analytic|montecarlo|hemicube]\n"
           "               [--samples N] [--resolution R] [--rays N] [--tolerance T]\n"
           "               [--elements N | --max-edge L] [--seed S] [--threads T] [--json]\n"
@@ -87,6 +96,12 @@ int main(int argc, char **argv)
         return rp_cmd_render(argc, argv);
     if (!strcmp(cmd, "probe"))
         return rp_cmd_probe(argc, argv);
+    if (!strcmp(cmd, "reference"))
+        return rp_cmd_reference(argc, argv);
+    if (!strcmp(cmd, "bench"))
+        return rp_cmd_bench(argc, argv);
+    if (!strcmp(cmd, "experiment"))
+        return rp_cmd_experiment(argc, argv);
     if (!strcmp(cmd, "formfactor"))
         return rp_cmd_formfactor(argc, argv);
     if (!strcmp(cmd, "throughput"))

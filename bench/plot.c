@@ -224,8 +224,9 @@ const char *const rp_runs_csv_columns =
     "peak_rss_mb: peak resident memory of the process during this run, MiB\n"
     "solver_mb: memory the solver reports holding, MiB\n"
     "rmse: image RMSE against the reference over measured pixels and bands, W sr^-1 m^-2\n"
-    "rmse_debiased: sqrt(max(0, rmse^2 - ref_rmse_se^2)), the RMSE against the truth with the reference's own "
-    "variance removed (charts, slopes and times to an error use it)\n"
+    "rmse_debiased: sqrt(max(0, rmse^2 - ref_rmse_se^2)), the reference's estimated variance removed; with a "
+    "Sobol' reference (whose variance estimate is pessimistic) the RMSE against the truth lies between "
+    "rmse_debiased and rmse\n"
     "relmse: relative MSE, mean of (x - r)^2 / (r^2 + 0.01)\n"
     "mae: mean absolute error over measured pixels and bands, W sr^-1 m^-2\n"
     "surface_err: RMS over measured surfaces and bands of the relative error of the area-averaged radiance\n"
@@ -426,17 +427,17 @@ static rp_status write_data(const rp_bench *b, const char *dir, size_t *ttt_poin
         if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, sub, name), err)) != RP_OK)
             break;
         fprintf(o.f, "# %s: means over seeds per checkpoint (runs.csv)\n"
-                     "# k wall_s wall_sd work samples rmse_debiased lo hi relmse mae surface_err "
-                     "surface_lo surface_hi rows rmse\n",
+                     "# k wall_s wall_sd work samples rmse lo hi relmse mae surface_err "
+                     "surface_lo surface_hi rows rmse_debiased\n",
                 b->methods[mi].text);
         for (size_t i = 0; i < s->npts; i++) {
             const rp_agg *a = &s->pts[i];
             /* error bars: one standard deviation over the seeds, kept
              * positive for the log axis */
-            double e = a->rmse_debiased, lo = e - a->rmse_debiased_sd, slo = a->surface_err - a->surface_err_sd;
+            double e = a->rmse, lo = e - a->rmse_sd, slo = a->surface_err - a->surface_err_sd;
             lo = lo > 0.1 * e ? lo : 0.1 * e;
             slo = slo > 0.1 * a->surface_err ? slo : 0.1 * a->surface_err;
-            double v[] = {a->wall_s, a->wall_sd, a->work, a->samples, e, lo, e + a->rmse_debiased_sd,
+            double v[] = {a->wall_s, a->wall_sd, a->work, a->samples, e, lo, e + a->rmse_sd,
                           a->relmse, a->mae, a->surface_err, slo, a->surface_err + a->surface_err_sd};
             fprintf(o.f, "%d", a->index);
             for (size_t k = 0; k < sizeof v / sizeof v[0]; k++) {
@@ -444,7 +445,7 @@ static rp_status write_data(const rp_bench *b, const char *dir, size_t *ttt_poin
                 num(o.f, v[k]);
             }
             fprintf(o.f, " %zu ", a->n);
-            num(o.f, a->rmse);
+            num(o.f, a->rmse_debiased);
             fputc('\n', o.f);
         }
         if ((st = rp_out_close(&o, 1, err)) != RP_OK)
@@ -477,7 +478,7 @@ static rp_status write_data(const rp_bench *b, const char *dir, size_t *ttt_poin
     double lo = INFINITY, hi = 0;
     for (size_t mi = 0; mi < b->nmethods; mi++)
         for (size_t i = 0; i < b->summary[mi].npts; i++) {
-            double e = b->summary[mi].pts[i].rmse_debiased;
+            double e = b->summary[mi].pts[i].rmse;
             if (isfinite(e) && e > 0) {
                 lo = e < lo ? e : lo;
                 hi = e > hi ? e : hi;
@@ -493,7 +494,7 @@ static rp_status write_data(const rp_bench *b, const char *dir, size_t *ttt_poin
         if (t && e && hi > 0) {
             for (size_t i = 0; i < s->npts; i++) {
                 t[i] = s->pts[i].wall_s;
-                e[i] = s->pts[i].rmse_debiased;
+                e[i] = s->pts[i].rmse;
             }
             for (int g = 0; g <= 60; g++) {
                 double level = lo * pow(hi / lo, g / 60.0);
@@ -529,7 +530,7 @@ static int any_image(const rp_bench *b)
 {
     for (size_t mi = 0; mi < b->nmethods; mi++)
         for (size_t i = 0; i < b->summary[mi].npts; i++)
-            if (isfinite(b->summary[mi].pts[i].rmse_debiased) && b->summary[mi].pts[i].rmse_debiased > 0)
+            if (isfinite(b->summary[mi].pts[i].rmse) && b->summary[mi].pts[i].rmse > 0)
                 return 1;
     return 0;
 }
@@ -595,8 +596,7 @@ static rp_status write_plots_gp(const rp_bench *b, const char *dir, const rp_ben
         gp_begin(f, "error_time");
         fprintf(f, "set logscale xy\nset format y '%%g'\nset xlabel '%s'\n"
                    "set ylabel 'image RMSE (W sr^-1 m^-2)'\n"
-                   "set title 'Error against time (RMSE with the reference variance removed; mean and sd over "
-                   "seeds)'\n",
+                   "set title 'Error against time (mean and standard deviation over seeds)'\n",
                 xtime);
         gp_plot_methods(f, b, "2:6:7:8", "yerrorlines", ref_se, "reference standard error");
         gp_end(f, "error_time");
@@ -604,7 +604,7 @@ static rp_status write_plots_gp(const rp_bench *b, const char *dir, const rp_ben
         gp_begin(f, "error_work");
         fprintf(f, "set logscale xy\nset xlabel 'work: rays cast + form factors computed'\n"
                    "set ylabel 'image RMSE (W sr^-1 m^-2)'\n"
-                   "set title 'Error against work (RMSE with the reference variance removed)'\n");
+                   "set title 'Error against work'\n");
         gp_plot_methods(f, b, "4:6:7:8", "yerrorlines", ref_se, "reference standard error");
         gp_end(f, "error_work");
 
@@ -612,7 +612,7 @@ static rp_status write_plots_gp(const rp_bench *b, const char *dir, const rp_ben
             gp_begin(f, "error_samples");
             fprintf(f, "set logscale xy\nset xlabel '%s'\n"
                        "set ylabel 'image RMSE (W sr^-1 m^-2)'\n"
-                       "set title 'Error against %s (RMSE with the reference variance removed)'\n",
+                       "set title 'Error against %s'\n",
                     opt->samples_label ? opt->samples_label : "samples per pixel",
                     opt->samples_label ? opt->samples_label : "samples per pixel");
             gp_plot_methods(f, b, "5:6:7:8", "yerrorlines", ref_se, "reference standard error");
@@ -917,13 +917,14 @@ static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench
     if (charts)
         fprintf(f, "![Image RMSE against solver time](error_time.png)\n\n");
     fprintf(f, "Log-log chart of image RMSE against solver wall time, all methods; error bars: one standard "
-               "deviation over seeds; dashed: the reference's own RMSE standard error. Charts, slopes and times "
-               "use the debiased RMSE, sqrt(RMSE^2 - reference standard error^2): the reference is independent of "
-               "every run, so its variance adds to the expected squared error and is removed. Deterministic "
-               "radiosity curves flatten at their discretisation error.\n\n"
-               "Fitted slopes of log debiased RMSE against log time, log work (rays + form factors) and log "
-               "samples, over every row of every seed (least squares, GSL `gsl_fit_linear`; 95%% interval from "
-               "Student's t with n - 2 degrees of freedom). Monte Carlo error falls as N^-1/2: slope -0.5.\n\n"
+               "deviation over seeds; dashed: the reference's own RMSE standard error, the floor below which "
+               "errors cannot be resolved. Deterministic radiosity curves flatten at their discretisation error. "
+               "(The reference is independent of every run, so the RMSE against it exceeds the RMSE against the "
+               "truth by at most its own error; `RMSE debiased` subtracts its estimated variance, which for a "
+               "Sobol' reference is pessimistic: the truth lies between the two columns.)\n\n"
+               "Fitted slopes of log RMSE against log time, log work (rays + form factors) and log samples, over "
+               "every row of every seed (least squares, GSL `gsl_fit_linear`; 95%% interval from Student's t with "
+               "n - 2 degrees of freedom). Monte Carlo error falls as N^-1/2: slope -0.5.\n\n"
                "| method | slope vs time [95%% CI] | slope vs work | slope vs samples | points |\n|---|---|---|---|---|\n");
     for (size_t mi = 0; mi < b->nmethods; mi++) {
         const rp_method_summary *s = &b->summary[mi];
@@ -946,11 +947,10 @@ static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench
 
     /* time to error */
     fprintf(f, "\n## Time to reach an error\n\nTarget image RMSE %.4g W sr^-1 m^-2 (%s). Seconds of solver time "
-               "at which the mean curve of the debiased RMSE first reaches it, interpolated in log-log between "
-               "checkpoints.\n\n"
+               "at which the mean RMSE curve first reaches it, interpolated in log-log between checkpoints.\n\n"
                "| method | seconds to RMSE %.4g |\n|---|---|\n",
             b->target,
-            b->target_auto ? "automatic: geometric mean of the best and worst final debiased RMSE; set it with --target"
+            b->target_auto ? "automatic: geometric mean of the best and worst final RMSE; set it with --target"
                            : "given with --target",
             b->target);
     for (size_t mi = 0; mi < b->nmethods; mi++) {
