@@ -256,6 +256,10 @@ int rp_cmd_render(int argc, char **argv)
         printf(", %.3g rays/s", tot.sum.rays / tot.seconds);
     if (tot.sum.paths > 0 && tot.seconds > 0)
         printf(", %.3g paths/s", tot.sum.paths / tot.seconds);
+    if (tot.sum.form_factors > 0)
+        printf(", %.4g form factors", tot.sum.form_factors);
+    if (tot.last.memory > 0)
+        printf(", %.1f MiB held by the method", tot.last.memory / 1048576.0);
     printf("\n");
     if (cli.png)
         printf("wrote %s\n", cli.png);
@@ -322,8 +326,10 @@ int rp_cmd_probe(int argc, char **argv)
         rp_json_string(stdout, cli.scene);
         printf(", \"hash\": \"%s\", \"method\": ", hash);
         rp_json_string(stdout, cli.method);
-        printf(", \"seed\": %llu, \"samples\": %.17g, \"seconds\": %.6f, \"rays\": %.17g, \"surfaces\": [",
-               (unsigned long long)cli.seed, est.samples, tot.seconds, tot.sum.rays);
+        printf(", \"seed\": %llu, \"samples\": %.17g, \"seconds\": %.6f, \"rays\": %.17g, "
+               "\"form_factors\": %.17g, \"memory_bytes\": %.17g, \"surfaces\": [",
+               (unsigned long long)cli.seed, est.samples, tot.seconds, tot.sum.rays, tot.sum.form_factors,
+               tot.last.memory);
         for (size_t s = 0; s < ns; s++) {
             printf("%s{\"name\": ", s ? ", " : "");
             rp_json_string(stdout, surf[s].name);
@@ -337,8 +343,10 @@ int rp_cmd_probe(int argc, char **argv)
         }
         printf("]}\n");
     } else {
-        printf("# %s, method %s, %.17g samples, %.3f s; radiance W sr^-1 m^-2 per band +- standard error\n",
-               cli.scene, cli.method, est.samples, tot.seconds);
+        printf("# %s, method %s, %.17g samples, %.3f s", cli.scene, cli.method, est.samples, tot.seconds);
+        if (tot.last.memory > 0)
+            printf(", %.1f MiB held by the method", tot.last.memory / 1048576.0);
+        printf("; radiance W sr^-1 m^-2 per band +- standard error\n");
         printf("%-20s %14s  radiance\n", "surface", "area");
         for (size_t s = 0; s < ns; s++) {
             printf("%-20s %14.6f ", surf[s].name, surf[s].area);
