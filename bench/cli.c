@@ -102,6 +102,18 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
         const rp_option_spec *spec = method_option(type, name);
         if (spec && !spec->arg)
             is_flag = 1;
+        int known = is_flag || spec || !strcmp(name, "method") || !strcmp(name, "png") ||
+                    !strcmp(name, "seed") || !strcmp(name, "threads") || !strcmp(name, "time");
+        for (const char *const *e = allowed_extra; e && *e; e++)
+            known |= strcmp(*e, name) == 0;
+        if (!known) {
+            if (type)
+                fprintf(stderr, "radpt %s: method %s has no option '--%s' (see radpt help %s)\n", command,
+                        type->name, name, type->name);
+            else
+                fprintf(stderr, "radpt %s: unknown option '--%s' (see radpt help)\n", command, name);
+            return 2;
+        }
         if (is_flag) {
             if (eq)
                 return usage(cli, "option '--%s' takes no value", name);
@@ -109,7 +121,9 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
         } else if (eq) {
             value = eq + 1;
         } else {
-            if (i + 1 >= argc)
+            /* "--spp -o x": the next word is an option, not this one's value
+             * (negative numbers still pass, to be refused by range checks). */
+            if (i + 1 >= argc || !strcmp(argv[i + 1], "-o") || !strncmp(argv[i + 1], "--", 2))
                 return usage(cli, "option '--%s' needs a value", name);
             value = argv[++i];
         }
@@ -142,17 +156,6 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
             cli->keys[cli->noptions] = spec->name;
             cli->values[cli->noptions++] = value;
         } else {
-            int ok = 0;
-            for (const char *const *e = allowed_extra; e && *e; e++)
-                ok |= strcmp(*e, name) == 0;
-            if (!ok) {
-                if (type)
-                    fprintf(stderr, "radpt %s: method %s has no option '--%s' (see radpt help %s)\n",
-                            command, type->name, name, type->name);
-                else
-                    fprintf(stderr, "radpt %s: unknown option '--%s' (see radpt help)\n", command, name);
-                return 2;
-            }
             if (cli->nextra == RP_CLI_MAX_OPTIONS)
                 return usage(cli, "too many options%s", "");
             /* keep the static name from allowed_extra, not the stack copy */

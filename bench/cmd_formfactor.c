@@ -28,10 +28,7 @@ static int ff_usage(const char *fmt, const char *a)
 {
     fprintf(stderr, "radpt formfactor: ");
     fprintf(stderr, fmt, a);
-    fprintf(stderr, "\nusage: radpt formfactor SCENE --from SURFACE --to SURFACE\n"
-                    "           [--method analytic|montecarlo|hemicube] [--samples N] [--resolution R]\n"
-                    "           [--rays N] [--tolerance T] [--elements N | --max-edge L]\n"
-                    "           [--seed S] [--threads T] [--json]\n");
+    fprintf(stderr, " (see radpt help)\n");
     return 2;
 }
 

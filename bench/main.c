@@ -75,7 +75,8 @@ int main(int argc, char **argv)
 {
     gsl_set_error_handler_off();
     if (argc < 2) {
-        print_usage(stderr);
+        fprintf(stderr, "radpt: no command; usage: radpt info|render|probe|reference|bench|experiment|"
+                        "formfactor|throughput|samplers|help ... (see radpt help)\n");
         return 2;
     }
     const char *cmd = argv[1];
@@ -108,7 +109,6 @@ int main(int argc, char **argv)
         return rp_cmd_throughput(argc, argv);
     if (!strcmp(cmd, "samplers"))
         return rp_cmd_samplers(argc, argv);
-    fprintf(stderr, "radpt: unknown command '%s'\n", cmd);
-    print_usage(stderr);
+    fprintf(stderr, "radpt: unknown command '%s' (see radpt help)\n", cmd);
     return 2;
 }

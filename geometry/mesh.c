@@ -384,6 +384,9 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     }
     if (max_edge == 0 && target == 0)
         target = RP_MESH_DEFAULT_COUNT;
+    if (target > RP_MESH_MAX_ELEMENTS)
+        return rp_error_set(err, RP_ERR_INPUT, "mesh: %zu elements asked for; the cap is %zu (memory)",
+                            target, RP_MESH_MAX_ELEMENTS);
 
     const size_t nfaces = rp_scene_nfaces(scene);
     const size_t nsurf = rp_scene_nsurfaces(scene);
@@ -606,9 +609,10 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
         double n = cc[fc[2 * f]];
         nvert_d += sf[f].nverts == 4 ? (n - 1) * (cc[fc[2 * f + 1]] - 1) : (n - 1) * (n - 2) / 2;
     }
-    if (ntotal > (double)(UINT32_MAX / 4 - 1) || nvert_d > (double)(UINT32_MAX - 1)) {
+    if (ntotal > (double)RP_MESH_MAX_ELEMENTS || nvert_d > (double)(UINT32_MAX - 1)) {
         st = rp_error_set(err, RP_ERR_INPUT,
-                          "mesh: max_edge %g gives %.0f elements and %.0f vertices (too many)",
+                          "mesh: max_edge %g gives %.0f elements and %.0f vertices (the cap is "
+                          "16777216 elements: memory)",
                           max_edge, ntotal, nvert_d);
         goto fail;
     }

@@ -25,6 +25,11 @@ typedef struct rp_mesh_params {
 /* Default: about 1,000 elements for the whole scene. */
 #define RP_MESH_DEFAULT_COUNT 1000
 
+/* A memory cap: meshes above this many elements (about 2.5 GB with their
+ * vertices and adjacency, before any solver state) are refused with a clear
+ * error rather than left to fail an allocation. */
+#define RP_MESH_MAX_ELEMENTS ((size_t)1 << 24)
+
 typedef struct rp_element {
     uint32_t v[4];     /* mesh vertex indices, counter-clockwise from the front;
                           v[3] == RP_NONE for triangles */

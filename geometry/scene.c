@@ -245,8 +245,11 @@ static char *dir_name(const char *path, int *ok)
 }
 
 /* Reads a whole file; NULL with errno set on failure. */
-static char *read_text(const char *path)
+/* The whole file as a string.  A NUL byte means the file is not text: NULL
+ * with errno EILSEQ and the byte's line in *nul_line. */
+static char *read_text(const char *path, int *nul_line)
 {
+    *nul_line = 0;
     FILE *f = fopen(path, "rb");
     if (!f)
         return NULL;
@@ -278,8 +281,11 @@ static char *read_text(const char *path)
     fclose(f);
     if (buf) {
         buf[n] = '\0';
-        if (memchr(buf, '\0', n)) {
-            /* A NUL byte: not a text file.  Reported by the caller as EILSEQ. */
+        const char *nul = memchr(buf, '\0', n);
+        if (nul) {
+            *nul_line = 1;
+            for (const char *c = buf; c < nul; c++)
+                *nul_line += *c == '\n';
             free(buf);
             errno = EILSEQ;
             return NULL;
@@ -993,7 +999,13 @@ static rp_status st_include(parser *p, const source *src, int line, char **tok, 
             st = fail(p, src->name, line, "include cycle: '%.200s' is already being read", path);
             goto done;
         }
-    text = read_text(path);
+    int nul_line;
+    text = read_text(path, &nul_line);
+    if (!text && nul_line) {
+        st = fail(p, src->name, line, "include '%.200s' is not a text file (a NUL byte on its line %d)",
+                  path, nul_line);
+        goto done;
+    }
     if (!text) {
         st = fail(p, src->name, line, "cannot read include '%.200s': %s", path, strerror(errno));
         goto done;
@@ -1348,7 +1360,12 @@ rp_status rp_scene_load(const char *path, rp_scene **out, rp_error *err)
         free(real);
         return load_obj(path, out, err);
     }
-    char *text = read_text(path);
+    int nul_line;
+    char *text = read_text(path, &nul_line);
+    if (!text && nul_line) {
+        free(real);
+        return rp_error_set(err, RP_ERR_INPUT, "%s:%d: a NUL byte: not a text scene file", path, nul_line);
+    }
     if (!text) {
         st = rp_error_set(err, RP_ERR_INPUT, "%s: cannot read: %s", path, strerror(errno));
         free(real);

@@ -3,6 +3,7 @@
 #include <criterion/criterion.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -169,4 +170,35 @@ Test(cli, render_writes_exr_with_metadata_and_fails_cleanly)
     cr_expect_eq(r.status, 1, "stderr: %s", r.err);
     cr_expect(access("/tmp/rp-no-such-dir", F_OK) != 0);
     rp_run_free(&r);
+}
+
+/* tests/bad/commands.tsv: malformed command lines and non-scene inputs, each
+ * with its exit status and a piece of its one-line message. */
+Test(cli, command_catalogue)
+{
+    FILE *f = fopen(RP_SOURCE_DIR "/tests/bad/commands.tsv", "r");
+    cr_assert(f);
+    char line[1024];
+    int n = 0;
+    while (fgets(line, sizeof line, f)) {
+        line[strcspn(line, "\n")] = '\0';
+        if (line[0] == '#' || line[0] == '\0')
+            continue;
+        char *tab1 = strchr(line, '\t');
+        char *tab2 = tab1 ? strchr(tab1 + 1, '\t') : NULL;
+        cr_assert(tab1 && tab2, "malformed catalogue line: %s", line);
+        *tab1 = *tab2 = '\0';
+        int status = atoi(line);
+        const char *args = tab1 + 1, *want = tab2 + 1;
+        rp_run r = rp_run_radpt(args);
+        cr_expect_eq(r.status, status, "'%s' exited %d, not %d; stderr: %s", args, r.status, status, r.err);
+        cr_expect(strstr(r.err, want) != NULL, "'%s': stderr lacks '%s': %s", args, want, r.err);
+        cr_expect_eq(rp_count_lines(r.err), 1, "'%s': stderr has %zu lines", args, rp_count_lines(r.err));
+        rp_run_free(&r);
+        n++;
+    }
+    fclose(f);
+    cr_expect(n >= 30, "only %d catalogue entries", n);
+    cr_expect(access("/tmp/radpt-bad.exr", F_OK) != 0, "no output file from a refused run");
+    cr_expect(access("/tmp/radpt-bad-dir", F_OK) != 0, "no output directory from a refused run");
 }

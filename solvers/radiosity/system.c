@@ -58,7 +58,7 @@ static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, c
     mp->size = sizeof *mp;
     unsigned long elements = 0;
     double max_edge = 0;
-    if ((st = rp_options_uint(o, "elements", 1, UINT32_MAX / 4, &elements, err)) != RP_OK)
+    if ((st = rp_options_uint(o, "elements", 1, RP_MESH_MAX_ELEMENTS, &elements, err)) != RP_OK)
         return st;
     if ((st = rp_options_double(o, "max-edge", 0, INFINITY, &max_edge, err)) != RP_OK)
         return st;
