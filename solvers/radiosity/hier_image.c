@@ -209,27 +209,47 @@ static const double *vtx_value(vtx_table *t, uint32_t id)
     return v;
 }
 
-/* Vertex radiosities of every leaf corner: lv[leafpos[node] * 4 + k] names
- * the vertex, val its value. */
-static rp_status build_vertices(const hier_state *s, vtx_table *t, uint32_t *leafpos, uint32_t **lv_out,
-                                rp_error *err)
+struct hier_vertices {
+    vtx_table t;
+    uint32_t *leafpos; /* nnodes: the leaf's number, RP_NONE for inner nodes */
+    uint32_t *lv;      /* leaves x 4: vertex of each corner */
+    size_t tcount;     /* T-vertices */
+};
+
+void hier_vertices_destroy(hier_vertices *v)
+{
+    if (!v)
+        return;
+    vtx_free(&v->t);
+    free(v->leafpos);
+    free(v->lv);
+    free(v);
+}
+
+rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_error *err)
 {
     const size_t nb = s->nb;
+    *out = NULL;
+    hier_vertices *hv = calloc(1, sizeof *hv);
+    if (!hv)
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image vertices");
+    vtx_table *t = &hv->t;
+    hv->leafpos = malloc((s->nnodes ? s->nnodes : 1) * sizeof *hv->leafpos);
     size_t nleaves = 0;
-    for (size_t i = 0; i < s->nnodes; i++) {
-        leafpos[i] = s->nodes[i].child == RP_NONE ? (uint32_t)nleaves++ : RP_NONE;
-    }
-    uint32_t *lv = malloc((nleaves ? nleaves : 1) * 4 * sizeof *lv);
-    if (!lv || !vtx_alloc(t, 4 * nleaves + 4, nb)) {
-        free(lv);
+    if (hv->leafpos)
+        for (size_t i = 0; i < s->nnodes; i++)
+            hv->leafpos[i] = s->nodes[i].child == RP_NONE ? (uint32_t)nleaves++ : RP_NONE;
+    hv->lv = malloc((nleaves ? nleaves : 1) * 4 * sizeof *hv->lv);
+    if (!hv->leafpos || !hv->lv || !vtx_alloc(t, 4 * nleaves + 4, nb)) {
+        hier_vertices_destroy(hv);
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image vertices");
     }
     for (size_t i = 0; i < s->nnodes; i++) {
         const hier_node *nd = &s->nodes[i];
-        if (leafpos[i] == RP_NONE)
+        if (hv->leafpos[i] == RP_NONE)
             continue;
         uint32_t sf = s->faces[nd->face].surface;
-        uint32_t *c = lv + (size_t)leafpos[i] * 4;
+        uint32_t *c = hv->lv + (size_t)hv->leafpos[i] * 4;
         c[3] = RP_NONE;
         for (int k = 0; k < nd->nverts; k++) {
             c[k] = vtx_insert(t, sf, nd->v[k]);
@@ -240,20 +260,38 @@ static rp_status build_vertices(const hier_state *s, vtx_table *t, uint32_t *lea
     }
     for (size_t i = 0; i < s->nnodes; i++) {
         const hier_node *nd = &s->nodes[i];
-        if (leafpos[i] == RP_NONE)
+        if (hv->leafpos[i] == RP_NONE)
             continue;
         uint32_t sf = s->faces[nd->face].surface;
-        const uint32_t *c = lv + (size_t)leafpos[i] * 4;
+        const uint32_t *c = hv->lv + (size_t)hv->leafpos[i] * 4;
         for (int k = 0; k < nd->nverts; k++) {
             uint32_t a = c[k], b = c[(k + 1) % nd->nverts];
             rp_vec3 d = rp_v3_sub(t->p[b], t->p[a]);
             vtx_probe(t, sf, a, b, rp_v3_dot(d, d), 0);
         }
     }
-    for (size_t v = 0; v < t->n; v++)
+    for (size_t v = 0; v < t->n; v++) {
         vtx_value(t, (uint32_t)v);
-    *lv_out = lv;
+        hv->tcount += t->ta[v] != RP_NONE;
+    }
+    *out = hv;
     return RP_OK;
+}
+
+size_t hier_vertices_tcount(const hier_vertices *v) { return v->tcount; }
+
+void hier_vertices_eval(const hier_state *s, const hier_vertices *v, uint32_t face, rp_vec3 p, double *B)
+{
+    const size_t nb = s->nb;
+    double w[4];
+    uint32_t leaf = hier_locate(s, face, p, w);
+    const hier_node *nd = &s->nodes[leaf];
+    const uint32_t *c = v->lv + (size_t)v->leafpos[leaf] * 4;
+    for (size_t b = 0; b < nb; b++)
+        B[b] = 0;
+    for (int k = 0; k < nd->nverts; k++)
+        for (size_t b = 0; b < nb; b++)
+            B[b] += w[k] * v->t.val[(size_t)c[k] * nb + b];
 }
 
 /* ---- the image ---- */
@@ -287,8 +325,7 @@ static void strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
 
 typedef struct img_job {
     const hier_state *s;
-    const vtx_table *vt;
-    const uint32_t *leafpos, *lv;
+    const hier_vertices *hv;
 } img_job;
 
 static void shade(const img_job *j, const rp_hit *h, uint64_t key, double *xyg, uint32_t *perm, double *L,
@@ -300,23 +337,19 @@ static void shade(const img_job *j, const rp_hit *h, uint64_t key, double *xyg, 
         L[b] = 0;
     if (!h->front)
         return; /* the back of a face is black */
-    double w[4];
-    uint32_t leaf = hier_locate(s, h->face, h->p, w);
     switch (s->recon) {
-    case HIER_RECON_FLAT:
+    case HIER_RECON_FLAT: {
+        double w[4];
+        uint32_t leaf = hier_locate(s, h->face, h->p, w);
         for (size_t b = 0; b < nb; b++)
             L[b] = s->B[(size_t)leaf * nb + b] / RP_PI;
         return;
-    case HIER_RECON_GOURAUD: {
-        const hier_node *nd = &s->nodes[leaf];
-        const uint32_t *c = j->lv + (size_t)j->leafpos[leaf] * 4;
-        for (int k = 0; k < nd->nverts; k++)
-            for (size_t b = 0; b < nb; b++)
-                L[b] += w[k] * j->vt->val[(size_t)c[k] * nb + b];
+    }
+    case HIER_RECON_GOURAUD:
+        hier_vertices_eval(s, j->hv, h->face, h->p, L);
         for (size_t b = 0; b < nb; b++)
             L[b] /= RP_PI;
         return;
-    }
     case HIER_RECON_GATHER: {
         /* E = int L_in cos dw ~ (pi / G) sum L_in = (1 / G) sum B_hit for
          * cosine-distributed directions (pdf cos / pi). */
@@ -357,21 +390,12 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
     rp_camera_frame_init(&frame, cam);
     const size_t nb = s->nb;
     img_job job = {.s = s};
-    vtx_table vt;
-    memset(&vt, 0, sizeof vt);
-    uint32_t *leafpos = NULL, *lv = NULL;
+    hier_vertices *hv = NULL;
     rp_status st = RP_OK;
     if (s->recon == HIER_RECON_GOURAUD) {
-        leafpos = malloc((s->nnodes ? s->nnodes : 1) * sizeof *leafpos);
-        if (!leafpos) {
-            st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image vertices");
-            goto done;
-        }
-        if ((st = build_vertices(s, &vt, leafpos, &lv, err)) != RP_OK)
-            goto done;
-        job.vt = &vt;
-        job.leafpos = leafpos;
-        job.lv = lv;
+        if ((st = hier_vertices_create(s, &hv, err)) != RP_OK)
+            return st;
+        job.hv = hv;
     }
     const uint32_t W = cam->width, H = cam->height;
     const unsigned spp = s->spp;
@@ -430,9 +454,6 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
         st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image scratch");
     else if (rays)
         *rays += (double)nrays;
-done:
-    vtx_free(&vt);
-    free(leafpos);
-    free(lv);
+    hier_vertices_destroy(hv);
     return st;
 }

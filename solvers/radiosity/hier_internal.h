@@ -23,10 +23,9 @@
  * approximation instead of the contour integral. */
 #define HIER_DISK_RATIO 1000.0
 /* Receivers closer than sqrt(ratio x area) to the source's centroid
- * integrate the kernel over their four quarters. */
-#ifndef HIER_NEAR_RATIO
+ * integrate the kernel over their four quarters, and take such links down
+ * with them when they are split. */
 #define HIER_NEAR_RATIO 16.0
-#endif
 
 /* A quadtree node: a root face or a piece of one.  Children are four
  * consecutive nodes with larger indices than their parent. */
@@ -44,7 +43,9 @@ typedef struct hier_node {
 enum {
     HIER_LINK_PARTIAL = 1u << 0,  /* some visibility rays blocked */
     HIER_LINK_STRADDLE = 1u << 1, /* one element crosses the other's plane */
-    HIER_LINK_TESTED = 1u << 2    /* visibility was sampled by rays */
+    HIER_LINK_TESTED = 1u << 2,   /* visibility was sampled by rays */
+    HIER_LINK_INVISIBLE = 1u << 3 /* every ray blocked: kept only until the
+                                     oracle decides not to refine it */
 };
 
 /* A one-way link: the receiver gathers rho F B_src through it. */
@@ -64,6 +65,7 @@ typedef struct hier_face {
     const double *rho;  /* per band */
     const double *Le;
     uint32_t surface;
+    int reflects;       /* some band of rho is > 0 */
 } hier_face;
 
 typedef enum hier_recon {
@@ -93,6 +95,8 @@ typedef struct hier_state {
     double *B;           /* nnodes x nb: radiosity (area mean over the node) */
     double *Bg;          /* nnodes x nb: rho x radiosity gathered by the node's links */
     double *Bd;          /* nnodes x nb: gathered radiosity pushed down from ancestors */
+    double *W;           /* nnodes: weight in the pull, the area of the leaves
+                            below that some link reaches (see hier_sweep) */
 
     hier_link *links;    /* sorted by receiver after every refinement pass */
     size_t nlinks, cap_links;
@@ -171,7 +175,21 @@ void hier_surfaces(const hier_state *s, double *out);
 rp_status hier_image(const hier_state *s, float *out, float *variance, double *rays,
                      rp_error *err);
 
+/* Crack-free vertex radiosities for Gouraud interpolation (hier_image.c),
+ * built from the current leaves. */
+typedef struct hier_vertices hier_vertices;
+rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_error *err);
+void hier_vertices_destroy(hier_vertices *v);
+/* Interpolated radiosity (nb bands) at point p of face `face`. */
+void hier_vertices_eval(const hier_state *s, const hier_vertices *v, uint32_t face, rp_vec3 p, double *B);
+/* How many vertices were anchored as T-vertices. */
+size_t hier_vertices_tcount(const hier_vertices *v);
+
 /* ---- shared helpers ---- */
+
+/* fmax and fmin without the library call (no NaNs reach them). */
+static inline double hier_max(double a, double b) { return a > b ? a : b; }
+static inline double hier_min(double a, double b) { return a < b ? a : b; }
 
 /* Counter-based random numbers (a pure function of the key and the
  * dimension), so results do not depend on the thread schedule:

@@ -2,25 +2,35 @@
  * refinement (Hanrahan, Salzman & Aupperle 1991, sec. 4 and 5).
  *
  * A link is one-way: receiver q gathers rho_q F_qp B_p from source p.  Its
- * form factor is estimated at q's centroid by Lambert's contour integral
- * over p (the disk approximation F = A cos cos / (pi r^2 + A) when p is far
- * away), times the fraction of a few jittered ray pairs between q and p
- * that are not blocked (Embree, rp_ray_occluded).  Shaft culling (Haines &
- * Wallace 1994) skips the rays when no face can lie between the two: for
- * every pair of faces the faces that might block a segment between them
- * are listed once (a face can only if its box meets the pair's box, it
- * reaches in front of both planes, and its own plane separates corners of
- * the pair: the walls of a convex room never block), and a link tests only
- * those, with the same box and plane tests on its two elements.
+ * form factor is Lambert's contour integral over p at q's centroid (the
+ * disk approximation F = A cos cos / (pi r^2 + A) when p is far away), or
+ * for near pairs the midpoint rule over q's four quarters, times the
+ * visibility of a few jittered ray pairs between q and p (Embree,
+ * rp_ray_occluded), each pair weighted by its kernel.  Shaft culling
+ * (Haines & Wallace 1994) skips the rays when no face can lie between the
+ * two: for every pair of faces the faces that might block a segment
+ * between them are listed once (a face can only if its box meets the
+ * pair's box, it reaches in front of both planes, and its own plane
+ * separates corners of the pair: the walls of a convex room never block),
+ * and a link tests only those, with the same box and plane tests on its
+ * two elements.
  *
  * BF refinement (sec. 5): a link whose error estimate
  *     rho_q * B_p * F_err   (the worst band)
  * exceeds bf_epsilon is replaced by four links to the children of the
  * larger of its two elements, as long as their area stays above min_area.
- * F_err is the estimate itself for a fully visible link; for a partially
- * visible link (a shadow boundary crosses it) or one whose elements cross
- * each other's planes it is the unoccluded estimate times partial_weight,
- * so those are refined first.
+ * F_err is the largest point estimate over q for a fully visible link;
+ * partial_weight times that for a partially visible link or one whose
+ * elements cross each other's planes, so shadow boundaries and contacts
+ * are refined first; and for a fully visible link from a pure emitter
+ * (uniform, with the contour integral exact over it) the kernel's
+ * variation across q, with only q split.  A link whose rays were all
+ * blocked is refined like a visible one (16 blocked rays between large
+ * elements can miss a penumbra) and dropped once the oracle lets it be.
+ * When a receiver is split its near links go down with it, re-evaluated
+ * at the children: a near source's kernel varies across the receiver, and
+ * an estimate at the parent's centre pushed down unchanged would give the
+ * children next to the source too little and the others too much.
  *
  * Refinement runs breadth first: the decisions and the new links' form
  * factors are computed in parallel, and nodes are created in link order in
@@ -41,8 +51,8 @@ static int box_overlap(rp_vec3 alo, rp_vec3 ahi, rp_vec3 blo, rp_vec3 bhi, doubl
            blo.y <= ahi.y + eps && alo.z <= bhi.z + eps && blo.z <= ahi.z + eps;
 }
 
-static rp_vec3 vmin(rp_vec3 a, rp_vec3 b) { return rp_v3(fmin(a.x, b.x), fmin(a.y, b.y), fmin(a.z, b.z)); }
-static rp_vec3 vmax(rp_vec3 a, rp_vec3 b) { return rp_v3(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z)); }
+static rp_vec3 vmin(rp_vec3 a, rp_vec3 b) { return rp_v3(hier_min(a.x, b.x), hier_min(a.y, b.y), hier_min(a.z, b.z)); }
+static rp_vec3 vmax(rp_vec3 a, rp_vec3 b) { return rp_v3(hier_max(a.x, b.x), hier_max(a.y, b.y), hier_max(a.z, b.z)); }
 
 /* 1 if some corner of node nd lies strictly on side `side` (+1 front, -1
  * behind) of face f's plane. */
@@ -173,25 +183,36 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
     if (q->face == p->face)
         return 0; /* planar: F_ii = 0 */
     const hier_face *fq = &s->faces[q->face], *fp = &s->faces[p->face];
+    if (!fq->reflects)
+        return 0; /* a black receiver (a pure emitter) gathers nothing */
     double pmax = -INFINITY, pmin = INFINITY, qmax = -INFINITY, qmin = INFINITY;
     for (int i = 0; i < p->nverts; i++) {
         double d = rp_v3_dot(fq->n, p->v[i]) - fq->d;
-        pmax = fmax(pmax, d);
-        pmin = fmin(pmin, d);
+        pmax = hier_max(pmax, d);
+        pmin = hier_min(pmin, d);
     }
     for (int i = 0; i < q->nverts; i++) {
         double d = rp_v3_dot(fp->n, q->v[i]) - fp->d;
-        qmax = fmax(qmax, d);
-        qmin = fmin(qmin, d);
+        qmax = hier_max(qmax, d);
+        qmin = hier_min(qmin, d);
     }
     /* Faces facing away: no link. */
     if (pmax <= s->eps || qmax <= s->eps)
         return 0;
     int straddle = pmin < -s->eps || qmin < -s->eps;
-    double F, Fmax;
+    double F, Fmax, Fvar = 0;
+    const int emitter = !fp->reflects;
     rp_vec3 dc = rp_v3_sub(p->c, q->c);
     if (!straddle && rp_v3_dot(dc, dc) > HIER_NEAR_RATIO * q->area) {
         F = Fmax = point_to_node(s, q->c, fq->n, p, 1);
+        if (emitter) {
+            /* How much the kernel varies across q, from its four quarters. */
+            rp_vec3 cc[4];
+            double ca[4];
+            hier_child_centroids(q, cc, ca);
+            for (int k = 0; k < 4; k++)
+                Fvar = hier_max(Fvar, fabs(point_to_node(s, cc[k], fq->n, p, 1) - F));
+        }
     } else {
         /* Near pairs (the kernel varies across q: point estimates at the
          * centroid put too much energy into pairs that meet at an edge),
@@ -204,11 +225,23 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
         hier_child_centroids(q, cc, ca);
         F = 0;
         Fmax = 0;
+        double fk[4], flo = INFINITY;
         for (int k = 0; k < 4; k++) {
-            double f = point_to_node(s, cc[k], fq->n, p, 0);
-            F += ca[k] / q->area * f;
-            Fmax = fmax(Fmax, f);
+            fk[k] = point_to_node(s, cc[k], fq->n, p, 0);
+            F += ca[k] / q->area * fk[k];
+            Fmax = hier_max(Fmax, fk[k]);
+            flo = hier_min(flo, fk[k]);
         }
+        Fvar = hier_max(Fmax - F, F - flo);
+        if (straddle)
+            /* All four centres may lie behind p while a corner of q sees
+             * it (the floor beside a box): the corners, pulled 1% towards
+             * the centroid, join the bound, so such a pair is refined
+             * rather than lost. */
+            for (int k = 0; k < q->nverts; k++) {
+                rp_vec3 x = rp_v3_madd(q->v[k], rp_v3_sub(q->c, q->v[k]), 0.01);
+                Fmax = hier_max(Fmax, point_to_node(s, x, fq->n, p, 0));
+            }
     }
     if (!(F > 0) && !(Fmax > 0))
         return 0;
@@ -233,6 +266,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
             perm[j] = t;
         }
         unsigned valid = 0, open = 0;
+        double wsum = 0, wopen = 0;
         for (unsigned k = 0; k < N; k++) {
             double u1 = ((k % m) + hier_u01(key, 4 * (uint64_t)k)) / m;
             double u2 = ((k / m) + hier_u01(key, 4 * (uint64_t)k + 1)) / m;
@@ -242,19 +276,41 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
             rp_vec3 ab = rp_v3_sub(b, a);
             if (straddle && (rp_v3_dot(ab, fq->n) <= 0 || rp_v3_dot(ab, fp->n) >= 0))
                 continue;
+            /* Each pair weighted by its kernel cos cos / r^2: where the
+             * visible part of p is the nearer one (or the one seen more
+             * squarely), a plain fraction of open rays would understate the
+             * energy it passes. */
+            double r2 = rp_v3_dot(ab, ab);
+            double w = hier_max(rp_v3_dot(ab, fq->n), 0) * hier_max(-rp_v3_dot(ab, fp->n), 0) / (r2 * r2);
             valid++;
+            wsum += w;
             *rays += 1;
-            if (!rp_ray_occluded(s->rc, a, fq->n, b, fp->n))
+            if (!rp_ray_occluded(s->rc, a, fq->n, b, fp->n)) {
                 open++;
+                wopen += w;
+            }
         }
-        vis = valid ? (double)open / valid : 1.0;
+        vis = valid ? (wsum > 0 ? wopen / wsum : (double)open / valid) : 1.0;
         if (open < valid)
             flags |= HIER_LINK_PARTIAL;
+        if (!(vis > 0))
+            flags |= HIER_LINK_INVISIBLE;
     }
     out->recv = qi;
     out->src = pi;
     out->F = F * vis;
-    out->F_err = (float)((flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE)) ? s->partial_weight * Fmax : Fmax);
+    if (flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE))
+        out->F_err = (float)(s->partial_weight * Fmax);
+    else if (emitter)
+        /* A pure emitter is uniform and the contour integral exact over it:
+         * the estimate's error is the kernel's variation across q. */
+        out->F_err = (float)Fvar;
+    else
+        out->F_err = (float)Fmax;
+    if (flags & HIER_LINK_INVISIBLE)
+        /* Refined (towards a penumbra it may hide) as an unoccluded link
+         * would be, not with the partial links' extra weight. */
+        out->F_err = (float)Fmax;
     out->flags = flags;
     return vis > 0 ? 1 : 2;
 }
@@ -354,10 +410,6 @@ rp_status hier_link_initial(hier_state *s, rp_error *err)
             if (code[k] == 0)
                 continue;
             s->form_factors++;
-            if (code[k] == 2) {
-                s->links_invisible++;
-                continue;
-            }
             if ((st = reserve_links(&links, &cap, nl + 1, err)) != RP_OK)
                 goto done;
             links[nl++] = buf[k];
@@ -382,10 +434,15 @@ static int decide(const hier_state *s, const hier_link *l)
     const double *Bp = s->B + (size_t)l->src * nb;
     double e = 0;
     for (size_t b = 0; b < nb; b++)
-        e = fmax(e, rho[b] * Bp[b]);
+        e = hier_max(e, rho[b] * Bp[b]);
     if (!(e * l->F_err > s->bf_eps))
         return 0;
     int can_q = 0.25 * q->area >= s->min_area, can_p = 0.25 * p->area >= s->min_area;
+    if (!s->faces[p->face].reflects && !(l->flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE)))
+        /* A pure emitter's radiosity is uniform and the contour integral
+         * is exact over the whole source: splitting it changes nothing, so
+         * only the receiver (across which the kernel varies) is split. */
+        return can_q ? 1 : 0;
     /* Split the larger element (Hanrahan et al. 1991, fig. 3: the one with
      * the larger form factor to the other). */
     if (can_q && (q->area >= p->area || !can_p))
@@ -395,74 +452,112 @@ static int decide(const hier_state *s, const hier_link *l)
     return 0;
 }
 
+/* A source near enough to the receiver that the kernel varies across it
+ * (the same test link_eval uses to integrate over the receiver). */
+static int near_pair(const hier_state *s, const hier_link *l)
+{
+    const hier_node *q = &s->nodes[l->recv], *p = &s->nodes[l->src];
+    rp_vec3 d = rp_v3_sub(p->c, q->c);
+    return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * q->area;
+}
+
 rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 {
     *refined = 0;
     rp_status st = RP_OK;
-    hier_link *out = NULL, *work = s->links;
-    size_t nout = 0, capout = 0, nwork = s->nlinks;
-    unsigned char *act = NULL, *code = NULL;
-    size_t capact = 0;
-    int own_work = 0; /* work is s->links until the first round is done */
-    if ((st = reserve_links(&out, &capout, s->nlinks + 16, err)) != RP_OK)
-        goto done;
-    while (nwork > 0) {
-        if (nwork > capact) {
-            unsigned char *a = realloc(act, nwork);
-            if (!a) {
-                st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory refining links");
-                goto done;
-            }
+    hier_link *cur = s->links, *next = NULL;
+    size_t ncur = s->nlinks, capcur = s->cap_links, nnext = 0, capnext = 0;
+    unsigned char *act = NULL, *code = NULL, *mark = NULL;
+    uint32_t *split = NULL;
+    size_t capact = 0, capmark = 0, nfresh = 0;
+    s->links = NULL; /* cur owns them until links_adopt */
+    s->cap_links = 0;
+    for (;;) {
+        if (ncur > capact) {
+            unsigned char *a = realloc(act, ncur);
+            if (!a)
+                goto nomem;
             act = a;
-            capact = nwork;
+            capact = ncur;
         }
+        if (s->nnodes > capmark) {
+            unsigned char *m = realloc(mark, s->nnodes);
+            if (!m)
+                goto nomem;
+            memset(m + capmark, 0, s->nnodes - capmark);
+            mark = m;
+            capmark = s->nnodes;
+        }
+        /* Links kept by an earlier round keep their decision (their
+         * source's radiosity and form factor did not change); only the
+         * new ones, from nfresh on, are judged. */
         size_t nsplit = 0;
-#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsplit)
-        for (long k = 0; k < (long)nwork; k++) {
-            act[k] = (unsigned char)decide(s, &work[k]);
+        memset(act, 0, nfresh);
+#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsplit) \
+    if (ncur - nfresh > 8192)
+        for (long k = (long)nfresh; k < (long)ncur; k++) {
+            act[k] = (unsigned char)decide(s, &cur[k]);
             nsplit += act[k] != 0;
         }
+        if (nsplit == 0)
+            break;
+        /* A receiver that is split takes its near links down with it
+         * (re-evaluated at the children's centres): pushed down
+         * unchanged, the kernel of a near source, which varies across the
+         * receiver, would give the children next to the source too little
+         * and the others too much. */
+        for (size_t k = 0; k < ncur; k++)
+            if (act[k] == 1)
+                mark[cur[k].recv] = 1;
+        for (size_t k = 0; k < ncur; k++)
+            if (act[k] == 0 && mark[cur[k].recv] && near_pair(s, &cur[k])) {
+                act[k] = 1;
+                nsplit++;
+            }
+        for (size_t k = 0; k < ncur; k++)
+            if (act[k] == 1)
+                mark[cur[k].recv] = 0;
         /* Keep what stays; create the children the splits need, in link
          * order (node numbers must not depend on threads). */
-        if ((st = reserve_links(&out, &capout, nout + nwork - nsplit, err)) != RP_OK)
+        uint32_t *sp = realloc(split, nsplit * 2 * sizeof *sp);
+        if (!sp)
+            goto nomem;
+        split = sp;
+        if ((st = reserve_links(&next, &capnext, ncur + 3 * nsplit, err)) != RP_OK)
             goto done;
-        uint32_t *split = malloc((nsplit ? nsplit : 1) * 2 * sizeof *split);
-        if (!split) {
-            st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory refining links");
-            goto done;
-        }
+        nnext = 0;
         size_t ns = 0;
-        for (size_t k = 0; k < nwork; k++) {
+        for (size_t k = 0; k < ncur; k++) {
             if (!act[k]) {
-                out[nout++] = work[k];
+                /* An invisible link the oracle would not refine is dropped:
+                 * 16 blocked rays between two large elements may miss a
+                 * penumbra, so it is dropped only once it is this fine. */
+                if (cur[k].flags & HIER_LINK_INVISIBLE)
+                    s->links_invisible++;
+                else
+                    next[nnext++] = cur[k];
                 continue;
             }
-            uint32_t node = act[k] == 1 ? work[k].recv : work[k].src;
-            if ((st = hier_subdivide(s, node, err)) != RP_OK) {
-                free(split);
+            uint32_t node = act[k] == 1 ? cur[k].recv : cur[k].src;
+            if ((st = hier_subdivide(s, node, err)) != RP_OK)
                 goto done;
-            }
             split[2 * ns] = (uint32_t)k;
             split[2 * ns + 1] = act[k];
             ns++;
         }
         *refined += ns;
         s->links_refined += ns;
-        hier_link *cand = malloc((ns ? ns : 1) * 4 * sizeof *cand);
-        unsigned char *cc = realloc(code, (ns ? ns : 1) * 4);
-        if (!cand || !cc) {
-            free(cand);
-            free(split);
-            if (cc)
-                code = cc;
-            st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory refining links");
-            goto done;
-        }
+        size_t kept = nnext;
+        unsigned char *cc = realloc(code, ns * 4);
+        if (!cc)
+            goto nomem;
         code = cc;
+        hier_link *cand = next + nnext;
         double rays = 0;
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays)
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) \
+    if (ns > 64)
         for (long t = 0; t < (long)ns * 4; t++) {
-            const hier_link *l = &work[split[2 * (t / 4)]];
+            const hier_link *l = &cur[split[2 * (t / 4)]];
             uint32_t c = (uint32_t)(t % 4);
             uint32_t qi = l->recv, pi = l->src;
             if (split[2 * (t / 4) + 1] == 1)
@@ -472,36 +567,51 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             code[t] = (unsigned char)link_eval(s, qi, pi, &cand[t], &rays);
         }
         s->rays += rays;
-        free(split);
-        size_t nn = 0;
         for (size_t t = 0; t < ns * 4; t++) {
             if (code[t] == 0)
                 continue;
             s->form_factors++;
-            if (code[t] == 2) {
+            next[nnext++] = cand[t];
+        }
+        /* Swap: next becomes the current list. */
+        hier_link *tl = cur;
+        cur = next;
+        next = tl;
+        size_t tc = capcur;
+        capcur = capnext;
+        capnext = tc;
+        ncur = nnext;
+        nfresh = kept;
+    }
+    /* What is left of the last round: drop the invisible links it kept. */
+    {
+        size_t m = 0;
+        for (size_t k = 0; k < ncur; k++) {
+            if (cur[k].flags & HIER_LINK_INVISIBLE) {
                 s->links_invisible++;
                 continue;
             }
-            cand[nn++] = cand[t];
+            cur[m++] = cur[k];
         }
-        if (own_work)
-            free(work);
-        work = cand;
-        own_work = 1;
-        nwork = nn;
+        ncur = m;
     }
-    if (own_work)
-        free(work);
-    own_work = 0;
-    work = NULL;
     s->refine_passes++;
-    st = links_adopt(s, out, nout, capout, err);
-    out = NULL;
+    st = links_adopt(s, cur, ncur, capcur, err);
+    cur = NULL;
+    goto done;
+nomem:
+    st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory refining links");
 done:
-    if (own_work)
-        free(work);
-    free(out);
+    if (cur) {
+        /* Failed: keep what there is, so the state stays consistent. */
+        s->links = cur;
+        s->cap_links = capcur;
+        s->nlinks = ncur;
+    }
+    free(next);
     free(act);
     free(code);
+    free(mark);
+    free(split);
     return st;
 }

@@ -60,6 +60,10 @@ static rp_status grow_nodes(hier_state *s, size_t need, rp_error *err)
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
         *arrs[k] = a;
     }
+    double *w = realloc(s->W, cap * sizeof *w);
+    if (!w)
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
+    s->W = w;
     s->cap_nodes = cap;
     return RP_OK;
 }
@@ -340,7 +344,7 @@ uint32_t hier_locate(const hier_state *s, uint32_t f, rp_vec3 p, double w[4])
 
 size_t hier_bytes(const hier_state *s)
 {
-    size_t b = s->cap_nodes * (sizeof(hier_node) + 3 * s->nb * sizeof(double));
+    size_t b = s->cap_nodes * (sizeof(hier_node) + (3 * s->nb + 1) * sizeof(double));
     b += s->cap_links * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
     if (s->cull)

@@ -32,20 +32,20 @@
 /* Defaults, relative to the scene (see the option help).  Chosen on the
  * Cornell box and the cube scenes: surface averages within 1% of a fine
  * reference (tests/test_hierarchical.c, README notes in the report). */
-#define HIER_DEFAULT_BF "2e-4"
+#define HIER_DEFAULT_BF "5e-3"
 #define HIER_DEFAULT_MIN_AREA "2e-5"
 
 static const rp_option_spec hier_options[] = {
     {"bf-epsilon", "EPS",
-     "refine a link while rho_receiver x B_source x F exceeds EPS x the largest emitted radiosity "
-     "(BF refinement)",
+     "refine a link while rho_receiver x B_source x F exceeds EPS x the scene's mean emitted "
+     "radiosity (BF refinement)",
      HIER_DEFAULT_BF},
     {"min-area", "FRAC", "smallest element area, as a fraction of the scene's total surface area",
      HIER_DEFAULT_MIN_AREA},
     {"partial-weight", "W",
      "partially visible links (and pairs crossing each other's planes) are judged by W x their "
      "unoccluded form factor, so shadow boundaries are refined first",
-     "2"},
+     "10"},
     {"vis-rays", "N", "visibility rays per link (rounded to a square, at most 64)", "16"},
     {"tolerance", "EPS",
      "stop when a sweep changes the energy by less than EPS (relative, worst band) and no link "
@@ -89,6 +89,7 @@ static void hier_fini(void *state)
     free(s->B);
     free(s->Bg);
     free(s->Bd);
+    free(s->W);
     free(s->links);
     free(s->link_start);
     free(s->pair_off);
@@ -119,7 +120,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     rp_status st;
     s->bf_rel = atof(HIER_DEFAULT_BF);
     s->min_area_rel = atof(HIER_DEFAULT_MIN_AREA);
-    s->partial_weight = 2;
+    s->partial_weight = 10;
     s->tolerance = 1e-6;
     unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16;
     s->max_faces = HIER_DEFAULT_MAX_FACES;
@@ -164,7 +165,6 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory");
     const rp_face *faces = rp_scene_faces(scene);
     const rp_vec3 *vs = rp_scene_vertices(scene);
-    double emax = 0;
     for (size_t f = 0; f < s->nfaces; f++) {
         hier_face *hf = &s->faces[f];
         const rp_material *m = rp_scene_face_material(scene, (uint32_t)f);
@@ -173,19 +173,26 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         hf->lo = hf->hi = vs[faces[f].v[0]];
         for (uint32_t k = 1; k < faces[f].nverts; k++) {
             rp_vec3 p = vs[faces[f].v[k]];
-            hf->lo = rp_v3(fmin(hf->lo.x, p.x), fmin(hf->lo.y, p.y), fmin(hf->lo.z, p.z));
-            hf->hi = rp_v3(fmax(hf->hi.x, p.x), fmax(hf->hi.y, p.y), fmax(hf->hi.z, p.z));
+            hf->lo = rp_v3(hier_min(hf->lo.x, p.x), hier_min(hf->lo.y, p.y), hier_min(hf->lo.z, p.z));
+            hf->hi = rp_v3(hier_max(hf->hi.x, p.x), hier_max(hf->hi.y, p.y), hier_max(hf->hi.z, p.z));
         }
         hf->rho = m->rho;
         hf->Le = m->Le;
         hf->surface = faces[f].surface;
         for (size_t b = 0; b < s->nb; b++) {
+            hf->reflects |= m->rho[b] > 0;
             s->e_norm[b] += faces[f].area * RP_PI * m->Le[b];
-            emax = fmax(emax, RP_PI * m->Le[b]);
         }
     }
     s->total_area = rp_scene_total_area(scene);
-    s->bf_eps = s->bf_rel * emax;
+    /* The oracle's scale: the area-weighted mean emitted radiosity of the
+     * band that emits most.  The largest emitted radiosity would judge
+     * interreflections by a small bright lamp (the Cornell box's is 150
+     * times its scene's mean) far more loosely than by a large dim one. */
+    double emean = 0;
+    for (size_t b = 0; b < s->nb; b++)
+        emean = hier_max(emean, s->e_norm[b] / rp_scene_total_area(scene));
+    s->bf_eps = s->bf_rel * emean;
     s->min_area = s->min_area_rel * s->total_area;
     s->eps = 1e-9 * rp_scene_diagonal(scene);
 
@@ -224,12 +231,19 @@ static double hier_sweep(hier_state *s)
         for (size_t b = 0; b < nb; b++)
             Bg[(size_t)qi * nb + b] = rho[b] * acc[b];
     }
-    /* Push (sec. 4.2): parents come before their children in node order. */
+    /* Push (sec. 4.2): parents come before their children in node order.
+     * W temporarily marks nodes that some link reaches (theirs or an
+     * ancestor's). */
+    double *W = s->W;
     for (size_t i = 0; i < nn; i++) {
         const hier_node *nd = &s->nodes[i];
+        int reached = start[i + 1] > start[i];
         if (nd->parent == RP_NONE)
             for (size_t b = 0; b < nb; b++)
                 Bd[i * nb + b] = 0;
+        else
+            reached |= W[nd->parent] > 0;
+        W[i] = reached;
         if (nd->child == RP_NONE)
             continue;
         for (uint32_t c = nd->child; c < nd->child + 4; c++)
@@ -237,7 +251,12 @@ static double hier_sweep(hier_state *s)
                 Bd[(size_t)c * nb + b] = Bd[i * nb + b] + Bg[i * nb + b];
     }
     /* Pull: leaves get E + everything gathered on the way down; parents
-     * the area-weighted mean of their children. */
+     * the weighted mean of their children.  A leaf no link reaches sees
+     * nothing, so nothing sees it (the floor under a box without a
+     * bottom): it is left out of its parents' means, which are what other
+     * elements gather, so a link to a parent carries the radiosity of the
+     * part that can be seen (its form factor already counts only that part
+     * through the visibility rays). */
     double change[HIER_MAX_BANDS];
     for (size_t b = 0; b < nb; b++)
         change[b] = 0;
@@ -246,29 +265,34 @@ static double hier_sweep(hier_state *s)
         double *Bi = B + i * nb;
         if (nd->child == RP_NONE) {
             const double *Le = s->faces[nd->face].Le;
+            int emits = 0;
             for (size_t b = 0; b < nb; b++) {
                 double v = RP_PI * Le[b] + Bg[i * nb + b] + Bd[i * nb + b];
                 change[b] += nd->area * fabs(v - Bi[b]);
                 Bi[b] = v;
+                emits |= Le[b] > 0;
             }
+            W[i] = (W[i] > 0 || emits) ? nd->area : 0;
             continue;
         }
-        double a = 0;
+        double a = 0, w = 0;
+        for (uint32_t c = nd->child; c < nd->child + 4; c++) {
+            a += s->nodes[c].area;
+            w += W[c];
+        }
         for (size_t b = 0; b < nb; b++)
             Bi[b] = 0;
         for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-            double ac = s->nodes[c].area;
-            a += ac;
+            double wc = w > 0 ? W[c] / w : s->nodes[c].area / a;
             for (size_t b = 0; b < nb; b++)
-                Bi[b] += ac * B[(size_t)c * nb + b];
+                Bi[b] += wc * B[(size_t)c * nb + b];
         }
-        for (size_t b = 0; b < nb; b++)
-            Bi[b] /= a;
+        W[i] = w;
     }
     double r = 0;
     for (size_t b = 0; b < nb; b++)
         if (s->e_norm[b] > 0)
-            r = fmax(r, change[b] / s->e_norm[b]);
+            r = hier_max(r, change[b] / s->e_norm[b]);
     return r;
 }
 
@@ -280,7 +304,7 @@ static void stats_fill(const hier_state *s, rp_hier_stats *o)
     for (size_t i = 0; i < s->nnodes; i++)
         if (s->nodes[i].child == RP_NONE) {
             o->leaves++;
-            amin = fmin(amin, s->nodes[i].area);
+            amin = hier_min(amin, s->nodes[i].area);
         }
     o->links = s->nlinks;
     o->links_full = s->links_full;
@@ -307,8 +331,7 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
         if ((st = hier_link_initial(s, err)) != RP_OK)
             return st;
         s->linked = 1;
-        hier_log(s, "hierarchical: %zu faces, %zu initial links (%zu invisible, not stored)", s->nfaces,
-                 s->nlinks, s->links_invisible);
+        hier_log(s, "hierarchical: %zu faces, %zu initial links", s->nfaces, s->nlinks);
     }
     size_t refined = 0;
     if ((st = hier_refine(s, &refined, err)) != RP_OK)

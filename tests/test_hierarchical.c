@@ -1,0 +1,406 @@
+/* Tests of hierarchical radiosity (solvers/radiosity/hierarchical.c).
+ *
+ * Check values come from closed forms or from another method, not from the
+ * code under test:
+ *   - the contour kernel against the closed form for a differential area
+ *     below a parallel rectangle (Howell's catalog, B-3 by superposition),
+ *     and its clipping against a hand-cut polygon;
+ *   - furnace (closed box, rho 0.5, Le 1): L = Le / (1 - rho) = 2.  Without
+ *     refinement every element is a face and the point-to-polygon form
+ *     factors from its centre to the five others close to 1 exactly, so
+ *     every leaf is within 1e-6 of 2.  With refinement a leaf also
+ *     gathers through its ancestors' links, whose form factors were
+ *     estimated at the ancestors' centres: the sums reaching a leaf are
+ *     then 1 only on average (measured 0.90 to 1.15 with the defaults),
+ *     and the leaves scatter around 2 by up to rho / (1 - rho) times that
+ *     (asserted: the area mean within 1%, each leaf within 15%);
+ *   - cube-ceiling: surface averages against the path tracer through the
+ *     solver interface (262144 probe points per surface, within 1% + 3
+ *     standard errors), and the energy invariant of a closed uniform-rho
+ *     scene, area-mean L = mean(Le) / (1 - rho) = 1/3 (1%);
+ *   - links grow as bf-epsilon shrinks (counts and the slope of log links
+ *     against log leaves are logged), and the counts add up: stored links
+ *     are the fully plus the partially visible ones, and the equivalent
+ *     uniform mesh is total area / smallest leaf (recomputed here from the
+ *     leaves);
+ *   - Gouraud images have no cracks: on the Cornell box (whose blocks force
+ *     T-vertices) the interpolated radiosity on both sides of every leaf
+ *     edge inside a face agrees;
+ *   - the same answers, bit for bit, with one thread and with two. */
+#include <criterion/criterion.h>
+
+#include <gsl/gsl_errno.h>
+#include <gsl/gsl_fit.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "geometry/scene.h"
+#include "solvers/radiosity/hier_internal.h"
+#include "solvers/radiosity/hierarchical.h"
+#include "solvers/solver.h"
+
+extern const rp_solver_type rp_solver_pathtrace;
+
+static void hsetup(void) { gsl_set_error_handler_off(); }
+
+static rp_scene *hload(const char *rel)
+{
+    char path[1024];
+    snprintf(path, sizeof path, "%s/%s", RP_SOURCE_DIR, rel);
+    rp_scene *s = NULL;
+    rp_error err = {""};
+    rp_status st = rp_scene_load(path, &s, &err);
+    cr_assert_eq(st, RP_OK, "scene %s: %s", rel, err.message);
+    return s;
+}
+
+/* The last message a solver logged. */
+static char last_log[1024];
+static void capture_log(void *ctx, const char *msg)
+{
+    (void)ctx;
+    snprintf(last_log, sizeof last_log, "%s", msg);
+}
+
+typedef struct hrun {
+    const rp_solver_type *type;
+    void *state;
+} hrun;
+
+/* Options as "key", "value" pairs, NULL-terminated. */
+static rp_status hrun_start(hrun *r, const rp_solver_type *type, const rp_scene *scene, unsigned want,
+                            int threads, const char *const *kv, rp_error *err)
+{
+    static const char *keys[16], *vals[16];
+    size_t n = 0;
+    for (; kv && kv[2 * n]; n++) {
+        keys[n] = kv[2 * n];
+        vals[n] = kv[2 * n + 1];
+    }
+    rp_options o = {.size = sizeof o, .want = want, .seed = 7, .threads = threads,
+                    .keys = keys, .values = vals, .count = n, .log = capture_log};
+    r->type = type;
+    r->state = calloc(1, type->state_size);
+    cr_assert(r->state);
+    rp_status st = rp_options_check(&o, type, err);
+    if (st == RP_OK)
+        st = type->init(r->state, scene, &o, err);
+    return st;
+}
+
+static void hrun_solve(hrun *r)
+{
+    rp_error err = {""};
+    for (int k = 0; k < 100000; k++) {
+        rp_step_info info;
+        memset(&info, 0, sizeof info);
+        rp_status st = r->type->step(r->state, &info, &err);
+        cr_assert_eq(st, RP_OK, "%s", err.message);
+        if (info.converged)
+            return;
+    }
+    cr_assert_fail("%s did not converge", r->type->name);
+}
+
+static void hrun_end(hrun *r)
+{
+    r->type->fini(r->state);
+    free(r->state);
+}
+
+static void solve_hier(hrun *r, const rp_scene *scene, unsigned want, int threads, const char *const *kv)
+{
+    rp_error err = {""};
+    rp_status st = hrun_start(r, &rp_solver_hierarchical, scene, want, threads, kv, &err);
+    cr_assert_eq(st, RP_OK, "%s", err.message);
+    hrun_solve(r);
+}
+
+/* ---- the contour kernel ------------------------------------------------ */
+
+/* Differential area to a parallel a x b rectangle at distance c, the
+ * normal through a corner (Howell, B-3). */
+static double corner_rect(double a, double b, double c)
+{
+    double A = a / c, B = b / c;
+    return (A / sqrt(1 + A * A) * atan(B / sqrt(1 + A * A)) + B / sqrt(1 + B * B) * atan(A / sqrt(1 + B * B))) /
+           (2 * RP_PI);
+}
+
+Test(hier, contour_kernel, .init = hsetup)
+{
+    /* Unit square centred 0.7 above the point: four corner rectangles. */
+    rp_vec3 sq[4] = {{-0.5, -0.5, 0.7}, {-0.5, 0.5, 0.7}, {0.5, 0.5, 0.7}, {0.5, -0.5, 0.7}};
+    double F = hier_point_polygon(rp_v3(0, 0, 0), rp_v3(0, 0, 1), sq, 4);
+    cr_assert_float_eq(F, 4 * corner_rect(0.5, 0.5, 0.7), 1e-13, "%.15g", F);
+    /* Off-centre: the rectangle [0.2, 1.4] x [0.1, 0.6] at height 0.5 from
+     * the origin, by superposition of corner rectangles. */
+    rp_vec3 r[4] = {{0.2, 0.1, 0.5}, {1.4, 0.1, 0.5}, {1.4, 0.6, 0.5}, {0.2, 0.6, 0.5}};
+    double want = corner_rect(1.4, 0.6, 0.5) - corner_rect(0.2, 0.6, 0.5) - corner_rect(1.4, 0.1, 0.5) +
+                  corner_rect(0.2, 0.1, 0.5);
+    F = hier_point_polygon(rp_v3(0, 0, 0), rp_v3(0, 0, 1), r, 4);
+    cr_assert_float_eq(F, want, 1e-13, "%.15g vs %.15g", F, want);
+    /* Clipping: a square in the plane x = 1 from z = -1 to z = 1 is seen
+     * only above the tangent plane z = 0: its form factor is that of the
+     * hand-cut upper half. */
+    rp_vec3 t[4] = {{1, -0.5, -1}, {1, 0.5, -1}, {1, 0.5, 1}, {1, -0.5, 1}};
+    rp_vec3 h[4] = {{1, -0.5, 0}, {1, 0.5, 0}, {1, 0.5, 1}, {1, -0.5, 1}};
+    double Ft = hier_point_polygon(rp_v3(0, 0, 0), rp_v3(0, 0, 1), t, 4);
+    double Fh = hier_point_polygon(rp_v3(0, 0, 0), rp_v3(0, 0, 1), h, 4);
+    cr_assert(Fh > 0.01);
+    cr_assert_float_eq(Ft, Fh, 1e-14, "%.15g vs %.15g", Ft, Fh);
+}
+
+/* ---- the furnace ------------------------------------------------------- */
+
+Test(hier, furnace_unrefined, .init = hsetup)
+{
+    rp_scene *scene = hload("scenes/furnace.scene");
+    hrun r;
+    /* No link is ever worth refining: every leaf is a face. */
+    const char *kv[] = {"bf-epsilon", "1e6", "tolerance", "1e-12", NULL};
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    double area[16], B[16], sums[16];
+    size_t n = rp_hierarchical_leaves(r.state, area, NULL, B, 16);
+    cr_assert_eq(n, 6);
+    cr_assert_eq(rp_hierarchical_leaf_form_factor_sums(r.state, sums, 16), 6);
+    for (size_t i = 0; i < n; i++) {
+        cr_assert_float_eq(sums[i], 1.0, 1e-12, "leaf %zu: form factors sum to %.15g", i, sums[i]);
+        cr_assert_float_eq(B[i] / RP_PI, 2.0, 1e-6, "leaf %zu: L = %.12g", i, B[i] / RP_PI);
+    }
+    /* The counts SPLASH-2 reports reach the log at convergence. */
+    cr_assert(strstr(last_log, "6 leaves") && strstr(last_log, "30 (30 fully visible, 0 partial"),
+              "log: %s", last_log);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
+Test(hier, furnace_refined, .init = hsetup)
+{
+    rp_scene *scene = hload("scenes/furnace.scene");
+    hrun r;
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, NULL);
+    size_t n = rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0);
+    double *area = malloc(n * sizeof *area), *B = malloc(n * sizeof *B), *S = malloc(n * sizeof *S);
+    cr_assert(area && B && S);
+    rp_hierarchical_leaves(r.state, area, NULL, B, n);
+    rp_hierarchical_leaf_form_factor_sums(r.state, S, n);
+    double at = 0, aL = 0, aS = 0, emax = 0, smin = INFINITY, smax = 0;
+    for (size_t i = 0; i < n; i++) {
+        double L = B[i] / RP_PI;
+        at += area[i];
+        aL += area[i] * L;
+        aS += area[i] * S[i];
+        emax = fmax(emax, fabs(L - 2));
+        smin = fmin(smin, S[i]);
+        smax = fmax(smax, S[i]);
+    }
+    cr_log_info("furnace, defaults: %zu leaves; form-factor sums %.4f to %.4f (area mean %.6f); "
+                "area-mean L %.6f; largest |L - 2| %.4f",
+                n, smin, smax, aS / at, aL / at, emax);
+    cr_assert(n > 6, "the defaults refine the furnace");
+    cr_assert_float_eq(aS / at, 1.0, 5e-3, "area-mean form-factor sum %.6f", aS / at);
+    cr_assert_float_eq(aL / at, 2.0, 0.02, "area-mean L %.6f", aL / at);
+    cr_assert_lt(emax, 0.3, "a leaf is off by %.4f", emax);
+    free(area);
+    free(B);
+    free(S);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
+/* ---- cube-ceiling ------------------------------------------------------ */
+
+Test(hier, cube_against_pathtrace, .init = hsetup, .timeout = 600)
+{
+    rp_scene *scene = hload("scenes/cube-ceiling.scene");
+    const size_t ns = rp_scene_nsurfaces(scene);
+    cr_assert_eq(rp_scene_nbands(scene), 1);
+    double h[8], pt[8], se[8];
+    hrun r;
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, NULL);
+    rp_estimate e = {.surface_radiance = h};
+    rp_error err = {""};
+    cr_assert_eq(r.type->estimate(r.state, &e, &err), RP_OK, "%s", err.message);
+    rp_hier_stats st;
+    rp_hierarchical_stats(r.state, &st);
+    hrun_end(&r);
+
+    hrun p;
+    const char *kv[] = {"samples", "262144", "batch", "16384", NULL};
+    cr_assert_eq(hrun_start(&p, &rp_solver_pathtrace, scene, RP_WANT_SURFACES, 0, kv, &err), RP_OK, "%s",
+                 err.message);
+    hrun_solve(&p);
+    rp_estimate pe = {.surface_radiance = pt, .surface_stderr = se};
+    cr_assert_eq(p.type->estimate(p.state, &pe, &err), RP_OK, "%s", err.message);
+    hrun_end(&p);
+
+    const rp_surface *surf = rp_scene_surfaces(scene);
+    double aL = 0, at = 0, worst = 0;
+    for (size_t s = 0; s < ns; s++) {
+        double tol = 0.01 * pt[s] + 3 * se[s];
+        cr_log_info("%-8s hierarchical %.6f  pathtrace %.6f +- %.6f  (%+.3f%%)", surf[s].name, h[s], pt[s], se[s],
+                    100 * (h[s] - pt[s]) / pt[s]);
+        worst = fmax(worst, fabs(h[s] - pt[s]) / pt[s]);
+        cr_expect_leq(fabs(h[s] - pt[s]), tol, "%s: %.6f vs %.6f +- %.6f", surf[s].name, h[s], pt[s], se[s]);
+        aL += surf[s].area * h[s];
+        at += surf[s].area;
+    }
+    cr_log_info("cube-ceiling: %zu leaves, %zu links; worst surface %.3f%%", st.leaves, st.links, 100 * worst);
+    /* Energy invariant: one face of six emits Le = 1, rho = 0.5. */
+    cr_assert_float_eq(aL / at, 1.0 / 3.0, 0.01 / 3.0, "area-mean L %.6f", aL / at);
+    rp_scene_destroy(scene);
+}
+
+Test(hier, links_grow_as_epsilon_shrinks, .init = hsetup, .timeout = 600)
+{
+    rp_scene *scene = hload("scenes/cube-ceiling.scene");
+    /* bf-epsilon and min-area shrink together, so the leaves are not held
+     * back by the area floor. */
+    static const char *eps[] = {"0.3", "0.1", "0.03", "0.01"};
+    static const char *amin[] = {"3e-4", "1e-4", "3e-5", "1e-5"};
+    double lx[4], ly[4];
+    size_t prev_links = 0, prev_leaves = 0;
+    for (int k = 0; k < 4; k++) {
+        hrun r;
+        const char *kv[] = {"bf-epsilon", eps[k], "min-area", amin[k], NULL};
+        solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+        rp_hier_stats st;
+        rp_hierarchical_stats(r.state, &st);
+        size_t n = rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0);
+        double *area = malloc(n * sizeof *area);
+        rp_hierarchical_leaves(r.state, area, NULL, NULL, n);
+        double amin_leaf = INFINITY;
+        for (size_t i = 0; i < n; i++)
+            amin_leaf = fmin(amin_leaf, area[i]);
+        free(area);
+        cr_log_info("bf-epsilon %s, min-area %s: %zu leaves, %zu links (%zu full, %zu partial, %zu invisible), "
+                    "equivalent uniform mesh %.0f",
+                    eps[k], amin[k], st.leaves, st.links, st.links_full, st.links_partial, st.links_invisible,
+                    st.uniform_equivalent);
+        cr_assert_eq(st.leaves, n);
+        cr_assert_eq(st.links, st.links_full + st.links_partial);
+        cr_assert_float_eq(st.uniform_equivalent, rp_scene_total_area(scene) / amin_leaf, 1e-9 * st.uniform_equivalent);
+        cr_assert_gt(st.links, prev_links);
+        cr_assert_gt(st.leaves, prev_leaves);
+        prev_links = st.links;
+        prev_leaves = st.leaves;
+        lx[k] = log((double)st.leaves);
+        ly[k] = log((double)st.links);
+        hrun_end(&r);
+    }
+    double c0, c1, cov00, cov01, cov11, sumsq;
+    gsl_fit_linear(lx, 1, ly, 1, 4, &c0, &c1, &cov00, &cov01, &cov11, &sumsq);
+    cr_log_info("slope of log links against log leaves: %.3f", c1);
+    rp_scene_destroy(scene);
+}
+
+/* ---- images ------------------------------------------------------------ */
+
+Test(hier, gouraud_is_crack_free, .init = hsetup, .timeout = 300)
+{
+    rp_scene *scene = hload("scenes/cornell.scene");
+    hrun r;
+    const char *kv[] = {"bf-epsilon", "0.1", NULL};
+    solve_hier(&r, scene, RP_WANT_IMAGE, 0, kv);
+    const hier_state *s = r.state;
+    rp_error err = {""};
+    hier_vertices *hv = NULL;
+    cr_assert_eq(hier_vertices_create(s, &hv, &err), RP_OK, "%s", err.message);
+    size_t tcount = hier_vertices_tcount(hv);
+    cr_assert_gt(tcount, 0, "no T-vertex: the test would prove nothing");
+    const size_t nb = s->nb;
+    double Bp[HIER_MAX_BANDS], Bm[HIER_MAX_BANDS], worst = 0;
+    size_t checked = 0;
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        if (nd->child != RP_NONE)
+            continue;
+        const hier_face *f = &s->faces[nd->face];
+        const hier_node *root = &s->nodes[nd->face];
+        for (int k = 0; k < nd->nverts; k++) {
+            rp_vec3 a = nd->v[k], b = nd->v[(k + 1) % nd->nverts];
+            rp_vec3 e = rp_v3_sub(b, a);
+            double len = rp_v3_length(e);
+            /* In-plane normal of the edge, and a point 37% along it. */
+            rp_vec3 m = rp_v3_normalize(rp_v3_cross(f->n, e));
+            rp_vec3 x = rp_v3_madd(a, e, 0.37);
+            double d = 1e-9 * len;
+            rp_vec3 xp = rp_v3_madd(x, m, d), xm = rp_v3_madd(x, m, -d);
+            /* Only edges inside the face: both points within the root. */
+            int inside = 1;
+            for (int j = 0; j < root->nverts && inside; j++) {
+                rp_vec3 ra = root->v[j], rb = root->v[(j + 1) % root->nverts];
+                rp_vec3 c = rp_v3_cross(rp_v3_sub(rb, ra), f->n);
+                double lim = 1e-6 * rp_v3_length(rp_v3_sub(rb, ra)) * len;
+                if (rp_v3_dot(rp_v3_sub(xp, ra), c) > -lim || rp_v3_dot(rp_v3_sub(xm, ra), c) > -lim)
+                    inside = 0;
+            }
+            if (!inside)
+                continue;
+            hier_vertices_eval(s, hv, nd->face, xp, Bp);
+            hier_vertices_eval(s, hv, nd->face, xm, Bm);
+            double scale = 0;
+            for (size_t bnd = 0; bnd < nb; bnd++) {
+                scale = fmax(scale, fabs(Bp[bnd]) + fabs(Bm[bnd]));
+                worst = fmax(worst, fabs(Bp[bnd] - Bm[bnd]) / (scale > 0 ? scale : 1));
+            }
+            checked++;
+        }
+    }
+    cr_log_info("Cornell box, bf-epsilon 0.1: %zu T-vertices, %zu leaf edges checked, largest relative jump %.3g",
+                tcount, checked, worst);
+    cr_assert_gt(checked, 100);
+    cr_assert_lt(worst, 1e-6, "a crack: radiosity jumps by %.3g across a leaf edge", worst);
+    hier_vertices_destroy(hv);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
+Test(hier, same_answer_for_any_thread_count, .init = hsetup, .timeout = 300)
+{
+    rp_scene *scene = hload("scenes/cornell.scene");
+    const rp_camera *cam = rp_scene_camera(scene);
+    const size_t nb = rp_scene_nbands(scene), npix = (size_t)cam->width * cam->height;
+    float *img[2];
+    double *B[2];
+    size_t n[2];
+    for (int t = 0; t < 2; t++) {
+        hrun r;
+        const char *kv[] = {"bf-epsilon", "0.1", "spp", "4", "reconstruct", "gouraud", NULL};
+        solve_hier(&r, scene, RP_WANT_IMAGE, t + 1, kv);
+        n[t] = rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0);
+        B[t] = malloc(n[t] * nb * sizeof *B[t]);
+        rp_hierarchical_leaves(r.state, NULL, NULL, B[t], n[t]);
+        img[t] = malloc(npix * nb * sizeof *img[t]);
+        rp_estimate e = {.radiance = img[t]};
+        rp_error err = {""};
+        cr_assert_eq(r.type->estimate(r.state, &e, &err), RP_OK, "%s", err.message);
+        hrun_end(&r);
+    }
+    cr_assert_eq(n[0], n[1]);
+    cr_assert_eq(memcmp(B[0], B[1], n[0] * nb * sizeof *B[0]), 0, "leaf radiosities differ");
+    cr_assert_eq(memcmp(img[0], img[1], npix * nb * sizeof *img[0]), 0, "images differ");
+    for (int t = 0; t < 2; t++) {
+        free(B[t]);
+        free(img[t]);
+    }
+    rp_scene_destroy(scene);
+}
+
+Test(hier, refuses_bad_options, .init = hsetup)
+{
+    rp_scene *scene = hload("scenes/cube-ceiling.scene");
+    rp_error err = {""};
+    hrun r;
+    const char *bad[] = {"reconstruct", "phong", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, bad, &err), RP_ERR_INPUT);
+    hrun_end(&r);
+    const char *few[] = {"max-faces", "5", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, few, &err), RP_ERR_UNSUPPORTED);
+    cr_assert(strstr(err.message, "6 faces"), "%s", err.message);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
