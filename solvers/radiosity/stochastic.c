@@ -59,6 +59,7 @@
 #include "../../geometry/raycast.h"
 #include "../../geometry/scene.h"
 #include "../pathtrace/sampler.h"
+#include "system.h"
 #include "../solver.h"
 #include "reconstruct.h"
 
@@ -170,20 +171,8 @@ static rp_status sj_parse(sj_state *s, const rp_options *o, rp_mesh_params *mp, 
 {
     rp_status st;
     const char *v;
-    memset(mp, 0, sizeof *mp);
-    mp->size = sizeof *mp;
-    unsigned long elements = 0;
-    double max_edge = 0;
-    if ((st = rp_options_uint(o, "elements", 1, RP_MESH_MAX_ELEMENTS, &elements, err)) != RP_OK)
+    if ((st = rp_rad_mesh_params("stochastic-jacobi", o, mp, err)) != RP_OK)
         return st;
-    if ((st = rp_options_double(o, "max-edge", 0, INFINITY, &max_edge, err)) != RP_OK)
-        return st;
-    if (rp_options_get(o, "elements") && rp_options_get(o, "max-edge"))
-        return rp_error_set(err, RP_ERR_INPUT, "stochastic-jacobi: give --elements or --max-edge, not both");
-    if (rp_options_get(o, "max-edge") && !(max_edge > 0))
-        return rp_error_set(err, RP_ERR_INPUT, "stochastic-jacobi: --max-edge must be positive");
-    mp->target_count = elements;
-    mp->max_edge = max_edge;
 
     unsigned long K = 16;
     *rays = 100000;

@@ -49,11 +49,10 @@ void rp_rad_system_fini(rp_rad_system *s)
     memset(s, 0, sizeof *s);
 }
 
-static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, const rp_options *o,
-                                   rp_mesh_params *mp, rp_rad_storage *storage, rp_error *err)
+rp_status rp_rad_mesh_params(const char *method, const rp_options *o, rp_mesh_params *mp,
+                             rp_error *err)
 {
     rp_status st;
-    const char *name = cfg->name;
     memset(mp, 0, sizeof *mp);
     mp->size = sizeof *mp;
     unsigned long elements = 0;
@@ -63,11 +62,21 @@ static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, c
     if ((st = rp_options_double(o, "max-edge", 0, INFINITY, &max_edge, err)) != RP_OK)
         return st;
     if (rp_options_get(o, "elements") && rp_options_get(o, "max-edge"))
-        return rp_error_set(err, RP_ERR_INPUT, "%s: give --elements or --max-edge, not both", name);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: give --elements or --max-edge, not both", method);
     if (rp_options_get(o, "max-edge") && !(max_edge > 0))
-        return rp_error_set(err, RP_ERR_INPUT, "%s: --max-edge must be positive", name);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: --max-edge must be positive", method);
     mp->target_count = elements;
     mp->max_edge = max_edge;
+    return RP_OK;
+}
+
+static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, const rp_options *o,
+                                   rp_mesh_params *mp, rp_rad_storage *storage, rp_error *err)
+{
+    rp_status st;
+    const char *name = cfg->name;
+    if ((st = rp_rad_mesh_params(name, o, mp, err)) != RP_OK)
+        return st;
 
     memset(&s->ffp, 0, sizeof s->ffp);
     s->ffp.size = sizeof s->ffp;

@@ -136,6 +136,12 @@ typedef struct rp_rad_system {
  * form-factor context and fills the material arrays.  B starts at E.  On
  * failure the caller calls rp_rad_system_fini (which accepts a partly built
  * system). */
+/* The element-count options every uniform-mesh radiosity method takes,
+ * --elements N or --max-edge L (not both), into mesh parameters; messages
+ * name the method. */
+rp_status rp_rad_mesh_params(const char *method, const rp_options *o, rp_mesh_params *mp,
+                             rp_error *err);
+
 rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const rp_scene *scene,
                              const rp_options *o, rp_error *err);
 void rp_rad_system_fini(rp_rad_system *s);
