@@ -13,6 +13,8 @@
 #include "../geometry/raycast.h"
 #include "../geometry/scene.h"
 #include "../solvers/radiosity/formfactor.h"
+#include "../solvers/radiosity/hierarchical.h"
+#include "metrics.h"
 #include "cli.h"
 #include "harness.h"
 #include "plot.h"
@@ -933,6 +935,109 @@ static rp_status exp_progressive(const rp_experiment_params *p, rp_error *err)
 
 /* ------------------------------------------------------------ hierarchy */
 
+/* Links against leaves as --bf-epsilon shrinks (min-area scaled with it so
+ * the refinement is limited by the oracle, not the floor).  Hanrahan et al.
+ * 1991 argue the link count grows linearly with the leaves; Garmann 1995
+ * argues worse for fixed geometry: the fitted slope of log links against
+ * log leaves says which.  Writes links.csv, links.png/svg and links.md. */
+static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *scene, rp_error *err)
+{
+    static const double bf_full[] = {0.3, 0.1, 0.03, 0.01, 0.003};
+    static const double bf_quick[] = {0.3, 0.1, 0.03};
+    const double *bf = p->quick ? bf_quick : bf_full;
+    size_t n = p->quick ? 3 : 5;
+    double leaves[5], links[5], seconds[5];
+    rp_status st = RP_OK;
+    for (size_t k = 0; k < n && st == RP_OK; k++) {
+        char eps[32], area[32];
+        snprintf(eps, sizeof eps, "%g", bf[k]);
+        snprintf(area, sizeof area, "%g", bf[k] * 1e-4);
+        const char *keys[2] = {"bf-epsilon", "min-area"};
+        const char *values[2] = {eps, area};
+        rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = p->threads,
+                        .keys = keys, .values = values, .count = 2};
+        rp_solver *s = NULL;
+        double t0 = rp_clock();
+        st = rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, err);
+        for (int i = 0; st == RP_OK && i < 1000; i++) {
+            rp_step_info info;
+            st = rp_solver_step(s, &info, err);
+            if (st == RP_OK && info.converged)
+                break;
+        }
+        if (st == RP_OK) {
+            rp_hier_stats hs;
+            rp_hierarchical_stats(rp_solver_state(s), &hs);
+            leaves[k] = (double)hs.leaves;
+            links[k] = (double)hs.links;
+            seconds[k] = rp_clock() - t0;
+            if (p->log) {
+                char line[160];
+                snprintf(line, sizeof line, "  hierarchical bf-epsilon %g: %zu leaves, %zu links, %.2f s", bf[k],
+                         hs.leaves, hs.links, seconds[k]);
+                p->log(p->log_ctx, line);
+            }
+        }
+        rp_solver_destroy(s);
+    }
+    if (st != RP_OK)
+        return st;
+    rp_fit fit;
+    rp_fit_loglog(leaves, links, n, 0.95, &fit);
+
+    char path[1200];
+    rp_out o;
+    if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "links.csv"), err)) != RP_OK)
+        return st;
+    fprintf(o.f, "bf_epsilon,min_area,leaves,links,seconds\n");
+    for (size_t k = 0; k < n; k++)
+        fprintf(o.f, "%g,%g,%.0f,%.0f,%.4f\n", bf[k], bf[k] * 1e-4, leaves[k], links[k], seconds[k]);
+    if ((st = rp_out_close(&o, 1, err)) != RP_OK)
+        return st;
+
+    const char *png = rp_gnuplot_png_terminal();
+    if (png) {
+        if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "links.gp"), err)) != RP_OK)
+            return st;
+        rp_gnuplot_preamble(o.f, png);
+        fprintf(o.f,
+                "set datafile separator ','\nset logscale xy\n"
+                "set title 'Hierarchical radiosity: links against leaf elements as bf-epsilon shrinks'\n"
+                "set xlabel 'leaf elements'\nset ylabel 'links'\n"
+                "f(x) = exp(%.17g) * x**%.17g\n"
+                "do for [t in 'png svg'] {\n"
+                "  if (t eq 'png') { @PNG; set output 'links.png' } else { @SVG; set output 'links.svg' }\n"
+                "  plot 'links.csv' skip 1 using 3:4 with linespoints pt 7 title 'hierarchical, Cornell box', \\\n"
+                "       f(x) with lines dt 2 title sprintf('fit: links ~ leaves^{%%.2f}', %.17g), \\\n"
+                "       x * (%.17g) with lines dt 3 title 'linear growth (slope 1)'\n"
+                "}\n",
+                fit.intercept, fit.slope, fit.slope, links[0] / leaves[0]);
+        if ((st = rp_out_close(&o, 1, err)) != RP_OK)
+            return st;
+        rp_error gerr;
+        if (rp_gnuplot_run(p->out_dir, "links.gp", &gerr) != RP_OK && p->log)
+            p->log(p->log_ctx, gerr.message);
+    }
+
+    if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "links.md"), err)) != RP_OK)
+        return st;
+    fprintf(o.f,
+            "# Links against leaves (hierarchical radiosity, Cornell box)\n\n"
+            "Each row is one converged hierarchical solve with `--bf-epsilon` as given and `--min-area` = "
+            "bf-epsilon x 1e-4 (so the oracle, not the area floor, limits refinement). Hanrahan, Salzman & "
+            "Aupperle (1991) argue links grow linearly with leaves; Garmann (1995) argues worse for fixed "
+            "geometry.\n\n![links against leaves](links.png)\n\n"
+            "| bf-epsilon | leaves | links | links per leaf | seconds |\n|---|---|---|---|---|\n");
+    for (size_t k = 0; k < n; k++)
+        fprintf(o.f, "| %g | %.0f | %.0f | %.1f | %.2f |\n", bf[k], leaves[k], links[k], links[k] / leaves[k],
+                seconds[k]);
+    if (fit.ok)
+        fprintf(o.f, "\nFitted slope of log links against log leaves (GSL least squares): %.3f, 95%% interval "
+                     "[%.3f, %.3f] over %zu points (bf-epsilon %g to %g, data in links.csv).\n",
+                fit.slope, fit.lo, fit.hi, fit.n, bf[0], bf[n - 1]);
+    return rp_out_close(&o, 1, err);
+}
+
 static rp_status exp_hierarchy(const rp_experiment_params *p, rp_error *err)
 {
     const rp_solver_type *t = rp_solver_lookup("hierarchical");
@@ -955,6 +1060,8 @@ static rp_status exp_hierarchy(const rp_experiment_params *p, rp_error *err)
                                       "classic solvers at equal time on the Cornell box.",
                            .sheet = 1, .command = p->command};
     st = run_bench(p, scene, path, list, budget, 1, REF_SPP(p), &out, p->out_dir, NULL, NULL, err);
+    if (st == RP_OK)
+        st = hierarchy_links(p, scene, err);
     rp_scene_destroy(scene);
     return st;
 }
@@ -971,7 +1078,8 @@ static const rp_experiment experiments[] = {
     {"meshing", "radiosity error against element size, observed order", exp_meshing},
     {"progressive", "progressive radiosity with and without ambient term and overshooting: error per shot",
      exp_progressive},
-    {"hierarchy", "hierarchical radiosity against the classic solvers (when registered)", exp_hierarchy},
+    {"hierarchy", "hierarchical radiosity against the classic solvers, and links against leaves as bf-epsilon "
+                  "shrinks (when registered)", exp_hierarchy},
 };
 
 static const rp_experiment *const experiment_list[] = {&experiments[0], &experiments[1], &experiments[2],

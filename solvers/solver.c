@@ -56,6 +56,8 @@ rp_status rp_solver_estimate(const rp_solver *s, rp_estimate *estimate, rp_error
 
 const rp_solver_type *rp_solver_type_of(const rp_solver *s) { return s->type; }
 
+const void *rp_solver_state(const rp_solver *s) { return s->state; }
+
 void rp_solver_destroy(rp_solver *s)
 {
     if (!s)

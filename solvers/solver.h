@@ -99,6 +99,9 @@ rp_status rp_solver_create(const rp_solver_type *type, const rp_scene *scene,
 rp_status rp_solver_step(rp_solver *s, rp_step_info *info, rp_error *err);
 rp_status rp_solver_estimate(const rp_solver *s, rp_estimate *estimate, rp_error *err);
 const rp_solver_type *rp_solver_type_of(const rp_solver *s);
+/* The method's state, for method-specific queries such as
+ * rp_hierarchical_stats (solvers/radiosity/hierarchical.h). */
+const void *rp_solver_state(const rp_solver *s);
 void rp_solver_destroy(rp_solver *s);
 
 /* Option look-up for methods: the value given for name, or NULL. */
