@@ -8,7 +8,7 @@
 #   make bench    throughput benchmarks on the Cornell box
 
 DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
-                libembree-dev libcgal-dev libgmp-dev libmpfr-dev libcriterion-dev \
+                libembree-dev libcgal-dev libcgal-demo libgmp-dev libmpfr-dev libcriterion-dev \
                 libpng-dev libtinyobjloader-dev gnuplot-nox
 
 CC  ?= gcc
@@ -35,8 +35,9 @@ LIB_OBJ := $(LIB_C:%.c=$(BUILD)/%.o) $(LIB_CXX:%.cpp=$(BUILD)/%.o)
 TEST_C  := $(wildcard tests/*.c)
 TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 
-# Scanned meshes come from CGAL's data set (libcgal-dev), extracted at build
-# time rather than committed.
+# Scanned meshes come from CGAL's data set, which Debian's libcgal-demo
+# installs under libcgal-dev's doc directory; extracted at build time
+# rather than committed.
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off
 
