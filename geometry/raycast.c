@@ -56,7 +56,7 @@
 #endif
 
 /* Relative self-intersection epsilon (see the header comment). */
-#define RP_RAYCAST_EPS_REL 1e-5
+#define RP_RAYCAST_EPS_REL RP_RAYCAST_DEFAULT_OFFSET
 
 /* Below this |cos| between ray and face normal the double-precision plane
  * refinement of the hit distance is not used. */
@@ -306,6 +306,12 @@ double rp_raycast_epsilon(const rp_raycast *rc)
     return rc->eps;
 }
 
+void rp_raycast_set_offset(rp_raycast *rc, double rel)
+{
+    double diag = rp_scene_diagonal(rc->scene);
+    rc->eps = rel * (isfinite(diag) && diag > 0 ? diag : 1.0);
+}
+
 /* A ray from o (double, world space) along unit d over (0, tfar]. */
 static void rp_ray_init(const rp_raycast *rc, struct RTCRay *ray, rp_vec3 o, rp_vec3 d, double tfar)
 {
@@ -397,7 +403,10 @@ static rp_vec3 rp_offset(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d)
 
 int rp_ray_closest_from(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, rp_hit *hit)
 {
-    rp_vec3 du = rp_v3_normalize(d);
+    /* Directions built from an orthonormal frame (the path tracer's) are
+     * unit to rounding: the square root and division are skipped then. */
+    double l2 = rp_v3_dot(d, d);
+    rp_vec3 du = fabs(l2 - 1.0) <= 1e-12 || !(l2 > 0) ? d : rp_v3_scale(d, 1.0 / sqrt(l2));
     rp_vec3 o = rp_offset(rc, p, n, du);
     struct RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);

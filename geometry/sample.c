@@ -13,20 +13,22 @@
  * The point on the face is uniform in area: the square-root
  * parameterisation for triangles (Shirley 1992, "Nonuniform random point
  * sets via warping", Graphics Gems III; Pharr, Jakob & Humphreys, PBRT 3,
- * eq. 13.6), and for a convex quad one of its two triangles chosen in
- * proportion to area, u1 rescaled to reuse it. */
+ * eq. 13.6), for a parallelogram the bilinear map of its two edges, and
+ * for any other convex quad one of its two triangles chosen in proportion
+ * to area, u1 rescaled to reuse it. */
 #include "sample.h"
 
 #include <gsl/gsl_randist.h>
 #include <stdlib.h>
+
+typedef struct rp_face_map rp_face_map;
 
 struct rp_area_sampler {
     const rp_scene *scene;
     size_t count;              /* faces with non-zero weight */
     uint32_t *faces;           /* [count]: alias-table index -> scene face */
     double *pdf;               /* [nfaces of the scene]: pdf_area per face */
-    double *share;             /* [count]: a quad's first-triangle area share,
-                                  cached: it costs three square roots */
+    rp_face_map *map;          /* [count]: how (u1, u2) maps onto the face */
     gsl_ran_discrete_t *table; /* NULL when count == 0 */
 };
 
@@ -68,6 +70,42 @@ static rp_vec3 face_point(const rp_scene *scene, const rp_face *fc, double share
     return rp_triangle_sample(a, c, v[fc->v[3]], u1 < 1.0 ? u1 : 1.0, u2);
 }
 
+/* A face prepared for sampling.  A parallelogram (most quads: boxes,
+ * walls, lamps) maps (u1, u2) bilinearly, p = v0 + u1 (v1 - v0) +
+ * u2 (v3 - v0): uniform in area with no square root or division, and a
+ * stratified or low-discrepancy (u1, u2) stays evenly spread on the face.
+ * Other faces use face_point. */
+struct rp_face_map {
+    rp_vec3 o, e1, e2;  /* parallelogram: origin and edges */
+    const rp_face *face; /* NULL for a parallelogram */
+    double share;
+};
+
+static rp_face_map face_map(const rp_scene *scene, const rp_face *fc)
+{
+    const rp_vec3 *v = rp_scene_vertices(scene);
+    rp_face_map m = {rp_v3(0, 0, 0), rp_v3(0, 0, 0), rp_v3(0, 0, 0), fc, quad_share(scene, fc)};
+    if (fc->nverts == 4) {
+        rp_vec3 e1 = rp_v3_sub(v[fc->v[1]], v[fc->v[0]]), e2 = rp_v3_sub(v[fc->v[3]], v[fc->v[0]]);
+        /* v2 = v1 + v3 - v0 up to rounding of the input. */
+        rp_vec3 gap = rp_v3_sub(rp_v3_add(v[fc->v[0]], v[fc->v[2]]), rp_v3_add(v[fc->v[1]], v[fc->v[3]]));
+        double scale = rp_v3_length(e1) + rp_v3_length(e2);
+        if (rp_v3_length(gap) <= 1e-12 * scale) {
+            m.o = v[fc->v[0]];
+            m.e1 = e1;
+            m.e2 = e2;
+            m.face = NULL;
+        }
+    }
+    return m;
+}
+
+static inline rp_vec3 face_map_point(const rp_scene *scene, const rp_face_map *m, double u1, double u2)
+{
+    return m->face ? face_point(scene, m->face, m->share, u1, u2)
+                   : rp_v3_madd(rp_v3_madd(m->o, m->e1, u1), m->e2, u2);
+}
+
 void rp_area_sampler_destroy(rp_area_sampler *s)
 {
     if (!s)
@@ -75,7 +113,7 @@ void rp_area_sampler_destroy(rp_area_sampler *s)
     gsl_ran_discrete_free(s->table);
     free(s->faces);
     free(s->pdf);
-    free(s->share);
+    free(s->map);
     free(s);
 }
 
@@ -103,9 +141,9 @@ rp_status rp_area_sampler_create(const rp_scene *scene, uint32_t surface, rp_are
         s->scene = scene;
         s->pdf = calloc(nfaces ? nfaces : 1, sizeof *s->pdf);
         s->faces = malloc((nfaces ? nfaces : 1) * sizeof *s->faces);
-        s->share = malloc((nfaces ? nfaces : 1) * sizeof *s->share);
+        s->map = malloc((nfaces ? nfaces : 1) * sizeof *s->map);
     }
-    if (!s || !w || !s->pdf || !s->faces || !s->share) {
+    if (!s || !w || !s->pdf || !s->faces || !s->map) {
         free(w);
         rp_area_sampler_destroy(s);
         return rp_error_set(err, RP_ERR_NOMEM, "area sampler: out of memory for %zu faces", nfaces);
@@ -134,7 +172,7 @@ rp_status rp_area_sampler_create(const rp_scene *scene, uint32_t surface, rp_are
         for (size_t i = 0; i < s->count; i++) {
             uint32_t f = s->faces[i];
             s->pdf[f] = w[i] / (total * faces[f].area);
-            s->share[i] = quad_share(scene, &faces[f]);
+            s->map[i] = face_map(scene, &faces[f]);
         }
         s->table = gsl_ran_discrete_preproc(s->count, w);
         if (!s->table) {
@@ -181,7 +219,7 @@ void rp_area_sampler_sample(const rp_area_sampler *s, double u0, double u1, doub
     size_t k = rp_alias_lookup(s->table, u0);
     uint32_t f = s->faces[k];
     const rp_face *fc = &rp_scene_faces(s->scene)[f];
-    out->p = face_point(s->scene, fc, s->share[k], u1, u2);
+    out->p = face_map_point(s->scene, &s->map[k], u1, u2);
     out->n = fc->normal;
     out->face = f;
     out->surface = fc->surface;

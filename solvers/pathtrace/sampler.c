@@ -4,7 +4,7 @@
 #include <math.h>
 #include <string.h>
 
-#define GOLDEN UINT64_C(0x9e3779b97f4a7c15)
+#define GOLDEN RP_SAMPLER_GOLDEN
 /* The largest double below 1. */
 #define ONE_MINUS_ULP 0x1.fffffffffffffp-1
 
@@ -82,6 +82,9 @@ static void sobol_directions(rp_sampler *s)
             v[k] = x;
         }
     }
+    for (unsigned d = 0; d < RP_SOBOL_DIMS; d++)
+        for (unsigned k = 0; k < 32; k++)
+            s->sobol_vr[d][k] = rp_reverse32(s->sobol_v[d][k]);
 }
 
 void rp_sampler_init(rp_sampler *s, rp_sampler_kind kind, uint64_t seed, uint64_t budget)
@@ -104,13 +107,6 @@ void rp_sampler_start(const rp_sampler *s, uint64_t stream, uint32_t index, rp_s
     out->index = index;
     out->stream_key = rp_hash64(rp_hash64(s->seed + GOLDEN) ^ (stream * GOLDEN + 1));
     out->key = rp_hash64(out->stream_key ^ rp_hash64((uint64_t)index + 0x632be59bd9b4e019));
-}
-
-static inline double u53(uint64_t h) { return (double)(h >> 11) * 0x1p-53; }
-
-static inline double random_dim(const rp_sample_point *p, unsigned dim)
-{
-    return u53(rp_hash64(p->key + (uint64_t)(dim + 1) * GOLDEN));
 }
 
 /* A keyed bijection of [0, n): cycle-walking (Black & Rogaway 2002) over
@@ -147,7 +143,7 @@ static uint32_t permute(uint32_t i, uint32_t n, uint64_t key)
  * round of m^2 samples with its own permutation (the padding of Pharr,
  * Jakob & Humphreys, PBRT 3rd ed., sec. 7.3), jittered within it.  Each
  * sample is uniform on [0,1)^2, so estimates stay unbiased. */
-static double stratified_dim(const rp_sample_point *p, unsigned dim)
+double rp_sampler_stratified(const rp_sample_point *p, unsigned dim)
 {
     uint32_t m = p->sampler->grid;
     uint32_t mm = m * m;
@@ -155,7 +151,7 @@ static double stratified_dim(const rp_sample_point *p, unsigned dim)
     uint64_t pkey = rp_hash64(p->stream_key ^ ((uint64_t)(dim >> 1) << 32 | round));
     uint32_t stratum = permute(cell, mm, pkey);
     uint32_t c = (dim & 1) ? stratum / m : stratum % m;
-    double u = ((double)c + random_dim(p, dim)) / (double)m;
+    double u = ((double)c + rp_sampler_random(p, dim)) / (double)m;
     return u < 1.0 ? u : ONE_MINUS_ULP;
 }
 
@@ -166,62 +162,4 @@ uint32_t rp_sobol_raw(const rp_sampler *s, uint32_t index, unsigned dim)
     for (; index; index &= index - 1) /* one XOR per set bit of the index */
         x ^= v[__builtin_ctz(index)];
     return x;
-}
-
-static inline uint32_t reverse32(uint32_t x)
-{
-    x = __builtin_bswap32(x);
-    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
-    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
-    return ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-}
-
-/* Owen's nested uniform scrambling (Owen 1995) by hashing, after Laine &
- * Karras (2011) and Burley (2020, "Practical hash-based Owen scrambling",
- * JCGT 9(4)): on the bit-reversed value, every step below changes a bit
- * only as a function of the bits below it (adding, multiplying by an odd
- * number, xor with an even multiple), which bit-reversed means a digit of
- * the fraction is permuted as a function of the digits before it: a
- * nested scramble, so the (t,m,s)-net structure survives.  Adding the
- * uniform key k0 first makes every scrambled point exactly uniform, so the
- * estimate stays unbiased.  The constants are ours (even multipliers). */
-static inline uint32_t owen_scramble(uint32_t x, uint64_t key)
-{
-    uint32_t k0 = (uint32_t)key, k1 = (uint32_t)(key >> 32);
-    x = reverse32(x);
-    x += k0;
-    x ^= x * 0x6b43a9b6u;
-    x *= k1 | 1u;
-    x ^= x * 0x3c6ef372u;
-    x += k1;
-    x ^= x * 0xa54ff53au;
-    x *= 0x2545f491u;
-    x ^= x * 0x1b873594u;
-    return reverse32(x);
-}
-
-static double sobol_dim(const rp_sample_point *p, unsigned dim)
-{
-    uint64_t h = rp_hash64(p->stream_key + (uint64_t)(dim + 1) * GOLDEN);
-    uint32_t x = owen_scramble(rp_sobol_raw(p->sampler, p->index, dim), h);
-    /* Digits past the 32nd are uniform under a full Owen scramble: take 20
-     * of them from the per-sample key (x * 2^20 + low fits 52 bits); their
-     * quality hardly matters, one multiply suffices. */
-    uint64_t low = ((p->key ^ h) * GOLDEN) >> 44;
-    return (double)(((uint64_t)x << 20) | low) * 0x1p-52;
-}
-
-double rp_sampler_get(const rp_sample_point *p, unsigned dim)
-{
-    switch (p->sampler->kind) {
-    case RP_SAMPLER_STRATIFIED:
-        return stratified_dim(p, dim);
-    case RP_SAMPLER_SOBOL:
-        if (dim < RP_SOBOL_DIMS)
-            return sobol_dim(p, dim);
-        return random_dim(p, dim);
-    case RP_SAMPLER_RANDOM:
-    default:
-        return random_dim(p, dim);
-    }
 }

@@ -33,6 +33,8 @@ typedef struct rp_sampler {
     uint64_t seed;
     uint32_t grid;                          /* stratified: strata per side */
     uint32_t sobol_v[RP_SOBOL_DIMS][32];    /* Sobol' direction numbers */
+    uint32_t sobol_vr[RP_SOBOL_DIMS][32];   /* the same, bit-reversed (scrambling works on
+                                               reversed digits) */
 } rp_sampler;
 
 /* One sample of one stream: the keys its dimensions are hashed from. */
@@ -54,8 +56,6 @@ void rp_sampler_init(rp_sampler *s, rp_sampler_kind kind, uint64_t seed, uint64_
 
 void rp_sampler_start(const rp_sampler *s, uint64_t stream, uint32_t index, rp_sample_point *out);
 
-/* Coordinate dim of the sample, in [0, 1). */
-double rp_sampler_get(const rp_sample_point *p, unsigned dim);
 
 /* The unscrambled Sobol' point's coordinate as a 32-bit fraction (tests). */
 uint32_t rp_sobol_raw(const rp_sampler *s, uint32_t index, unsigned dim);
@@ -66,6 +66,85 @@ static inline uint64_t rp_hash64(uint64_t z)
     z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
     z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
     return z ^ (z >> 31);
+}
+
+#define RP_SAMPLER_GOLDEN UINT64_C(0x9e3779b97f4a7c15)
+
+static inline double rp_u53(uint64_t h) { return (double)(h >> 11) * 0x1p-53; }
+
+/* Independent uniform numbers: a hash of the sample's key and dim. */
+static inline double rp_sampler_random(const rp_sample_point *p, unsigned dim)
+{
+    return rp_u53(rp_hash64(p->key + (uint64_t)(dim + 1) * RP_SAMPLER_GOLDEN));
+}
+
+/* Jittered strata (out of line: cycle-walking permutation). */
+double rp_sampler_stratified(const rp_sample_point *p, unsigned dim);
+
+static inline uint32_t rp_reverse32(uint32_t x)
+{
+    x = __builtin_bswap32(x);
+    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    return ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+}
+
+/* Owen's nested uniform scrambling (Owen 1995) by hashing, after Laine &
+ * Karras (2011) and Burley (2020, "Practical hash-based Owen scrambling",
+ * JCGT 9(4)).  x is the point's bit-reversed value; on it every step changes a bit
+ * only as a function of the bits below it (adding, multiplying by an odd
+ * number, xor with an even multiple), which bit-reversed means a digit of
+ * the fraction is permuted as a function of the digits before it: a
+ * nested scramble, so the (t,m,s)-net structure survives.  Adding the
+ * uniform key k0 first makes every scrambled point exactly uniform, so the
+ * estimate stays unbiased.  The constants are ours (even multipliers).
+ * Returns the scrambled point, reversed back. */
+static inline uint32_t rp_owen_scramble_reversed(uint32_t x, uint64_t key)
+{
+    uint32_t k0 = (uint32_t)key, k1 = (uint32_t)(key >> 32);
+    x += k0;
+    x ^= x * 0x6b43a9b6u;
+    x *= k1 | 1u;
+    x ^= x * 0x3c6ef372u;
+    x += k1;
+    x ^= x * 0xa54ff53au;
+    x *= 0x2545f491u;
+    x ^= x * 0x1b873594u;
+    return rp_reverse32(x);
+}
+
+static inline double rp_sampler_sobol(const rp_sample_point *p, unsigned dim)
+{
+    uint64_t h = rp_hash64(p->stream_key + (uint64_t)(dim + 1) * RP_SAMPLER_GOLDEN);
+    /* The Sobol' point built directly in bit-reversed form (XOR commutes
+     * with the reversal), so only the scramble's result is reversed. */
+    const uint32_t *vr = p->sampler->sobol_vr[dim];
+    uint32_t xr = 0;
+    for (uint32_t i = p->index; i; i &= i - 1)
+        xr ^= vr[__builtin_ctz(i)];
+    uint32_t x = rp_owen_scramble_reversed(xr, h);
+    /* Digits past the 32nd are uniform under a full Owen scramble: take 20
+     * of them from the per-sample key (x * 2^20 + low fits 52 bits); their
+     * quality hardly matters, one multiply suffices. */
+    uint64_t low = ((p->key ^ h) * RP_SAMPLER_GOLDEN) >> 44;
+    return (double)(((uint64_t)x << 20) | low) * 0x1p-52;
+}
+
+/* Coordinate dim of the sample, in [0, 1).  Inline: the path tracer asks
+ * for a few dozen numbers per path. */
+static inline double rp_sampler_get(const rp_sample_point *p, unsigned dim)
+{
+    switch (p->sampler->kind) {
+    case RP_SAMPLER_STRATIFIED:
+        return rp_sampler_stratified(p, dim);
+    case RP_SAMPLER_SOBOL:
+        if (dim < RP_SOBOL_DIMS)
+            return rp_sampler_sobol(p, dim);
+        return rp_sampler_random(p, dim);
+    case RP_SAMPLER_RANDOM:
+    default:
+        return rp_sampler_random(p, dim);
+    }
 }
 
 #endif
