@@ -149,7 +149,7 @@ void rp_gnuplot_preamble(FILE *f, const char *png)
                 * specs neither squeeze nor cover it */
                "set key outside right top vertical Left reverse box\n"
                "set format x '%%g'\nset format y '%%g'\n"
-               "set datafile missing 'nan'\n"
+               "set datafile missing '?'\n"
                "set border 3\nset tics nomirror\n",
             png ? png : "pngcairo");
 }
@@ -252,13 +252,21 @@ static void csv_field(FILE *f, const char *s)
     fputc('"', f);
 }
 
-/* %.6g, "nan" for non-finite values */
+/* %.6g; a value not measured (NaN inside) is written as "?" in gnuplot
+ * data (set datafile missing '?') and as an empty field in CSV, so no file
+ * carries the text "nan". */
 static void num(FILE *f, double v)
 {
     if (isfinite(v))
         fprintf(f, "%.6g", v);
     else
-        fputs("nan", f);
+        fputc('?', f);
+}
+
+static void csv_num(FILE *f, double v)
+{
+    if (isfinite(v))
+        fprintf(f, "%.6g", v);
 }
 
 static rp_status write_runs_csv(const rp_bench *b, const char *dir, rp_error *err)
@@ -287,11 +295,11 @@ static rp_status write_runs_csv(const rp_bench *b, const char *dir, rp_error *er
                           c->peak_rss_mb, c->solver_mb, c->rmse, c->rmse_debiased, c->relmse, c->mae, c->surface_err,
                           b->ref->rmse_se};
             for (size_t k = 0; k < sizeof v / sizeof v[0]; k++) {
-                num(f, v[k]);
+                csv_num(f, v[k]);
                 fputc(',', f);
             }
             fprintf(f, "%d,%d,%d,", c->ref_flag, c->converged, c->final);
-            num(f, c->measure_s);
+            csv_num(f, c->measure_s);
             fputc('\n', f);
         }
     }
@@ -510,7 +518,7 @@ static rp_status write_data(const rp_bench *b, const char *dir, size_t *ttt_poin
         free(e);
         /* a point gnuplot can always read, outside the plotted range, so
          * an empty block is not an error */
-        fprintf(o.f, "nan nan\n\n\n");
+        fprintf(o.f, "? ?\n\n\n");
     }
     return rp_out_close(&o, 1, err);
 }
