@@ -16,6 +16,7 @@
 #include "bench/plot.h"
 #include "bench/reference.h"
 #include "geometry/scene.h"
+#include "scene_util.h"
 
 static char *make_tmpdir(void)
 {
@@ -32,25 +33,7 @@ static void remove_tree(const char *dir)
     cr_expect_eq(system(cmd), 0);
 }
 
-static rp_scene *load(const char *name)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/scenes/%s", RP_SOURCE_DIR, name);
-    rp_scene *s = NULL;
-    rp_error err;
-    rp_status st = rp_scene_load(path, &s, &err);
-    cr_assert_eq(st, RP_OK, "%s", err.message);
-    return s;
-}
 
-static rp_scene *parse(const char *text)
-{
-    rp_scene *s = NULL;
-    rp_error err;
-    rp_status st = rp_scene_parse(text, "test", NULL, &s, &err);
-    cr_assert_eq(st, RP_OK, "%s", err.message);
-    return s;
-}
 
 /* ------------------------------------------------------------ metrics */
 
@@ -218,7 +201,7 @@ Test(harness, method_specs)
 Test(reference, furnace_is_exact)
 {
     char *dir = make_tmpdir();
-    rp_scene *scene = load("furnace.scene");
+    rp_scene *scene = rp_test_load("scenes/furnace.scene");
     double L = 0;
     rp_error err;
     cr_assert_eq(rp_reference_furnace(scene, &L, &err), 1);
@@ -246,20 +229,20 @@ Test(reference, furnace_detection_is_from_the_scene)
 {
     rp_error err;
     double L[3];
-    rp_scene *s = parse("bands grey\nmaterial m reflect 0.5 emit 1\nbox b m 0 0 0 1 1 1 outward\n");
+    rp_scene *s = rp_test_parse("bands grey\nmaterial m reflect 0.5 emit 1\nbox b m 0 0 0 1 1 1 outward\n");
     cr_expect_eq(rp_reference_furnace(s, L, &err), 0);
     rp_scene_destroy(s);
     /* the same box inward with another reflectance and emission is one */
-    s = parse("bands grey\nmaterial m reflect 0.25 emit 3\nbox b m 0 0 0 2 1 1 inward\n");
+    s = rp_test_parse("bands grey\nmaterial m reflect 0.25 emit 3\nbox b m 0 0 0 2 1 1 inward\n");
     cr_expect_eq(rp_reference_furnace(s, L, &err), 1);
     cr_expect_float_eq(L[0], 3 / 0.75, 1e-15);
     rp_scene_destroy(s);
     /* inward, but two materials that differ */
-    s = parse("bands grey\nmaterial m reflect 0.5 emit 1\nmaterial n reflect 0.4 emit 1\n"
+    s = rp_test_parse("bands grey\nmaterial m reflect 0.5 emit 1\nmaterial n reflect 0.4 emit 1\n"
               "quad a m 0 0 0  1 0 0  1 1 0  0 1 0\nquad b n 0 0 1  0 1 1  1 1 1  1 0 1\n");
     cr_expect_eq(rp_reference_furnace(s, L, &err), 0);
     rp_scene_destroy(s);
-    s = load("cornell.scene");
+    s = rp_test_load("scenes/cornell.scene");
     cr_expect_eq(rp_reference_furnace(s, L, &err), 0);
     rp_scene_destroy(s);
 }
@@ -273,7 +256,7 @@ static const char *plates =
 Test(reference, cache_hit_and_miss)
 {
     char *dir = make_tmpdir();
-    rp_scene *scene = parse(plates);
+    rp_scene *scene = rp_test_parse(plates);
     rp_error err;
     rp_reference_params p = {.size = sizeof p, .spp = 8, .samples = 256, .cache_dir = dir};
     rp_reference *a = NULL, *b = NULL, *c = NULL;
@@ -374,7 +357,7 @@ Test(harness, tiny_bench_files_agree, .timeout = 120)
     char cache[128], out[128];
     snprintf(cache, sizeof cache, "%s/refs", dir);
     snprintf(out, sizeof out, "%s/out", dir);
-    rp_scene *scene = load("furnace.scene");
+    rp_scene *scene = rp_test_load("scenes/furnace.scene");
     rp_error err;
     rp_reference_params rp = {.size = sizeof rp, .cache_dir = cache};
     rp_reference *ref = NULL;

@@ -23,28 +23,10 @@
 
 #include "geometry/mesh.h"
 #include "geometry/scene.h"
+#include "scene_util.h"
 
-static rp_scene *parse_in(const char *text, const char *dir)
-{
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    rp_status st = rp_scene_parse(text, "mesh.scene", dir, &s, &err);
-    cr_assert_eq(st, RP_OK, "scene: %s", err.message);
-    return s;
-}
 
-static rp_scene *parse(const char *text) { return parse_in(text, NULL); }
 
-static rp_scene *load(const char *rel)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/%s", RP_SOURCE_DIR, rel);
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    rp_status st = rp_scene_load(path, &s, &err);
-    cr_assert_eq(st, RP_OK, "scene: %s", err.message);
-    return s;
-}
 
 static rp_mesh *make_mesh(const rp_scene *s, double max_edge, size_t target)
 {
@@ -317,7 +299,7 @@ static void check_locate(const rp_scene *s, const rp_mesh *m, int n, unsigned lo
 
 Test(mesh, unit_square_quarter_is_4x4)
 {
-    rp_scene *s = parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
+    rp_scene *s = rp_test_parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
     rp_mesh *m = make_mesh(s, 0.25, 0);
     cr_assert_eq(rp_mesh_nelements(m), 16);
     cr_assert_eq(rp_mesh_nvertices(m), 25);
@@ -346,7 +328,7 @@ Test(mesh, unit_square_quarter_is_4x4)
 
 Test(mesh, rectangle_2x1_is_8x4)
 {
-    rp_scene *s = parse(LIGHT "quad q e 0 0 0  2 0 0  2 1 0  0 1 0\n");
+    rp_scene *s = rp_test_parse(LIGHT "quad q e 0 0 0  2 0 0  2 1 0  0 1 0\n");
     rp_mesh *m = make_mesh(s, 0.25, 0);
     cr_assert_eq(rp_mesh_nelements(m), 32);
     cr_assert_eq(rp_mesh_nvertices(m), 9 * 5);
@@ -358,7 +340,7 @@ Test(mesh, rectangle_2x1_is_8x4)
         for (int i = 0; i < 4; i++)
             cr_assert_eq(rp_v3_length(rp_v3_sub(V[E[e].v[(i + 1) % 4]], V[E[e].v[i]])), 0.25);
     /* Same counts when the long side is v1v2 (m along v1v2). */
-    rp_scene *s2 = parse(LIGHT "quad q e 0 0 0  1 0 0  1 2 0  0 2 0\n");
+    rp_scene *s2 = rp_test_parse(LIGHT "quad q e 0 0 0  1 0 0  1 2 0  0 2 0\n");
     rp_mesh *m2 = make_mesh(s2, 0.25, 0);
     cr_assert_eq(rp_mesh_nelements(m2), 32);
     check_areas(s, m);
@@ -375,7 +357,7 @@ Test(mesh, triangle_is_k_squared)
 {
     /* Edges 3, 4, 5: k = ceil(5 / 0.7) = 8 (the longest edge rules the
      * class of all three sides). */
-    rp_scene *s = parse(LIGHT "triangle t e 0 0 0  3 0 0  0 4 0\n");
+    rp_scene *s = rp_test_parse(LIGHT "triangle t e 0 0 0  3 0 0  0 4 0\n");
     rp_mesh *m = make_mesh(s, 0.7, 0);
     cr_assert_eq(rp_mesh_nelements(m), 64);
     cr_assert_eq(rp_mesh_nvertices(m), 9 * 10 / 2);
@@ -399,7 +381,7 @@ Test(mesh, obtuse_triangle_and_trapezoid)
 {
     /* A trapezoid is no parallelogram, so the inverse bilinear map takes
      * the quadratic branch; the triangle has a 150-degree corner. */
-    rp_scene *s = parse(LIGHT "quad trap e 0 0 0  4 0 0  3 2 0  1 2 0\n"
+    rp_scene *s = rp_test_parse(LIGHT "quad trap e 0 0 0  4 0 0  3 2 0  1 2 0\n"
                               "triangle obt e 0 0 1  5 0 1  -2 0.7 1\n"
                               "quad kite e 0 0 3  2 -1 3  3 2 3  -0.5 1.5 3\n");
     rp_mesh *m = make_mesh(s, 0.3, 0);
@@ -416,7 +398,7 @@ Test(mesh, obtuse_triangle_and_trapezoid)
 Test(mesh, box_is_conforming)
 {
     /* 3 x 2 x 1 box at max_edge 0.4: 8, 5 and 3 cuts along x, y, z. */
-    rp_scene *s = parse(LIGHT "box b e 0 0 0  3 2 1  outward\n");
+    rp_scene *s = rp_test_parse(LIGHT "box b e 0 0 0  3 2 1  outward\n");
     rp_mesh *m = make_mesh(s, 0.4, 0);
     size_t F = 2 * (8 * 5 + 8 * 3 + 5 * 3);
     cr_assert_eq(rp_mesh_nelements(m), F);
@@ -431,7 +413,7 @@ Test(mesh, box_is_conforming)
     check_locate(s, m, 100, 5);
     rp_mesh_destroy(m);
     /* Inward boxes run every shared edge the other way round. */
-    rp_scene *s2 = parse(LIGHT "box b e -1 -2 -3  0.5 1 2  inward\n");
+    rp_scene *s2 = rp_test_parse(LIGHT "box b e -1 -2 -3  0.5 1 2  inward\n");
     m = make_mesh(s2, 0.35, 0);
     check_areas(s2, m);
     check_elements(m);
@@ -447,7 +429,7 @@ Test(mesh, triangle_mesh_surfaces_conform)
 {
     /* cube.off (6 quads, triangulated by the reader) and an L-shaped
      * hexagon: triangles of one surface share their edge grids. */
-    rp_scene *s = parse_in(LIGHT "mesh cube e cube.off scale 2\n"
+    rp_scene *s = rp_test_parse_in(LIGHT "mesh cube e cube.off scale 2\n"
                                  "mesh ell e lshape.obj translate 0 0 5\n",
                            RP_SOURCE_DIR "/tests/data");
     rp_mesh *m = make_mesh(s, 0.3, 0);
@@ -477,7 +459,7 @@ Test(mesh, surfaces_do_not_share_vertices)
 {
     /* Two quads sharing an edge but in different surfaces, cut differently:
      * no vertex is shared and no neighbour crosses. */
-    rp_scene *s = parse(LIGHT "quad a e 0 0 0  1 0 0  1 1 0  0 1 0\n"
+    rp_scene *s = rp_test_parse(LIGHT "quad a e 0 0 0  1 0 0  1 1 0  0 1 0\n"
                               "quad b e 1 0 0  3 0 0  3 1 0  1 1 0\n");
     rp_mesh *m = make_mesh(s, 0.3, 0);
     /* a: 4 x 4; b: 7 x 4 */
@@ -494,7 +476,7 @@ Test(mesh, surfaces_do_not_share_vertices)
 
 Test(mesh, target_count)
 {
-    rp_scene *q = parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
+    rp_scene *q = rp_test_parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
     rp_mesh *m = make_mesh(q, 0, 100);
     cr_assert_eq(rp_mesh_nelements(m), 100); /* 10 x 10 is reachable exactly */
     rp_mesh_destroy(m);
@@ -503,7 +485,7 @@ Test(mesh, target_count)
     rp_mesh_destroy(m);
     rp_scene_destroy(q);
 
-    rp_scene *b = parse(LIGHT "box b e 0 0 0  3 2 1  outward\n"
+    rp_scene *b = rp_test_parse(LIGHT "box b e 0 0 0  3 2 1  outward\n"
                               "triangle t e 5 0 0  7 0 0  5 3 0\n");
     /* The count is a step function of max_edge (here ... 38, 68 ... near
      * 50), so targets are where a step lies within 20%. */
@@ -517,7 +499,7 @@ Test(mesh, target_count)
     }
     rp_scene_destroy(b);
 
-    rp_scene *c = load("scenes/cornell.scene");
+    rp_scene *c = rp_test_load("scenes/cornell.scene");
     size_t ct[] = {RP_MESH_DEFAULT_COUNT, 3000, 10000};
     for (size_t i = 0; i < 3; i++) {
         m = make_mesh(c, 0, ct[i]);
@@ -531,7 +513,7 @@ Test(mesh, target_count)
 
 Test(mesh, cornell_default)
 {
-    rp_scene *c = load("scenes/cornell.scene");
+    rp_scene *c = rp_test_load("scenes/cornell.scene");
     rp_mesh *m = NULL;
     rp_error err = {""};
     cr_assert_eq(rp_mesh_create(c, NULL, &m, &err), RP_OK, "%s", err.message);
@@ -552,7 +534,7 @@ Test(mesh, cornell_default)
 
 Test(mesh, bad_params)
 {
-    rp_scene *s = parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
+    rp_scene *s = rp_test_parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
     rp_mesh_params bad[] = {
         {.size = sizeof(rp_mesh_params), .max_edge = -1},
         {.size = sizeof(rp_mesh_params), .max_edge = NAN},
@@ -605,7 +587,7 @@ Test(mesh, welds_near_coincident_corners)
     fclose(f);
     char text[512];
     snprintf(text, sizeof text, LIGHT "mesh soup e %s\n", path);
-    rp_scene *s = parse(text);
+    rp_scene *s = rp_test_parse(text);
     remove(path);
     rp_mesh *m = make_mesh(s, 0.5, 0);
     /* Longest edge sqrt 2: k = 3; 2 G^2 9 elements on a (3G + 1)^2 grid. */
@@ -624,7 +606,7 @@ Test(mesh, welds_near_coincident_corners)
 Test(mesh, quality)
 {
     rp_mesh_quality q;
-    rp_scene *s = parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
+    rp_scene *s = rp_test_parse(LIGHT "quad q e 0 0 0  1 0 0  1 1 0  0 1 0\n");
     rp_mesh *m = make_mesh(s, 0.25, 0);
     rp_mesh_quality_get(m, &q);
     /* Squares: exactly 1 (powers of two are exact). */
@@ -642,7 +624,7 @@ Test(mesh, quality)
     rp_scene_destroy(s);
 
     /* A 2 x 1 rectangle as one element: L^2 / A = 4 / 2. */
-    s = parse(LIGHT "quad q e 0 0 0  2 0 0  2 1 0  0 1 0\n");
+    s = rp_test_parse(LIGHT "quad q e 0 0 0  2 0 0  2 1 0  0 1 0\n");
     m = make_mesh(s, 2, 0);
     rp_mesh_quality_get(m, &q);
     cr_assert_eq(rp_mesh_nelements(m), 1);
@@ -652,7 +634,7 @@ Test(mesh, quality)
 
     /* Equilateral triangle cut 5 x 5: 1; right isosceles legs 1:
      * (sqrt 3 / 4) (sqrt 2)^2 / (1/2) = sqrt 3. */
-    s = parse(LIGHT "triangle eq e 0 0 0  1 0 0  0.5 0.86602540378443865 0\n"
+    s = rp_test_parse(LIGHT "triangle eq e 0 0 0  1 0 0  0.5 0.86602540378443865 0\n"
                     "triangle ri e 0 0 1  1 0 1  0 1 1\n");
     uint32_t first, count;
     m = make_mesh(s, 0.2, 0);

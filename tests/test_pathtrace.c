@@ -28,6 +28,7 @@
 #include <string.h>
 
 #include "geometry/scene.h"
+#include "scene_util.h"
 #include "solvers/pathtrace/sampler.h"
 #include "solvers/solver.h"
 
@@ -37,23 +38,7 @@
 
 /* ---------------------------------------------------------------- helpers */
 
-static rp_scene *load(const char *name)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/scenes/%s", RP_SOURCE_DIR, name);
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    cr_assert_eq(rp_scene_load(path, &s, &err), RP_OK, "%s", err.message);
-    return s;
-}
 
-static rp_scene *parse(const char *text)
-{
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    cr_assert_eq(rp_scene_parse(text, "inline.scene", NULL, &s, &err), RP_OK, "%s", err.message);
-    return s;
-}
 
 /* Options as a NULL-terminated list "key", "value", ... */
 typedef struct opts {
@@ -367,7 +352,7 @@ Test(pathtrace, samplers_are_uniform)
  * within 3 of its standard errors. */
 static void furnace_check(const char *sampler, const char *spp)
 {
-    rp_scene *sc = load("furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     image im = render(sc, 2024, 0, "sampler", sampler, "spp", spp, NULL);
     cr_assert_eq(im.nbands, 1u);
     cr_assert_float_eq(im.samples, atof(spp), 0);
@@ -406,7 +391,7 @@ Test(pathtrace, furnace_spectral_bands)
     /* Five bands with different rho and Le: each band is its own furnace,
      * L_b = Le_b / (1 - rho_b); the image mean per band within 3 standard
      * errors and 0.5%.  Also checks that nothing assumes three bands. */
-    rp_scene *sc = parse("bands 400 450 500 550 600\n"
+    rp_scene *sc = rp_test_parse("bands 400 450 500 550 600\n"
                          "material m reflect 0.1 0.3 0.5 0.7 0.8 emit 1 2 0.5 0 3\n"
                          "box room m 0 0 0 2 1 1.5 inward\n"
                          "camera eye 0.4 0.5 0.3 look 2 0 1.5 up 0 1 0 fov 80 size 48 32\n");
@@ -435,7 +420,9 @@ Test(pathtrace, furnace_spectral_bands)
 
 static void plates_check(const char *scene, double F)
 {
-    rp_scene *sc = load(scene);
+    char rel[256];
+    snprintf(rel, sizeof rel, "scenes/%s", scene);
+    rp_scene *sc = rp_test_load(rel);
     uint32_t em = surface(sc, "emitter"), rc = surface(sc, "receiver");
     double want = 0.5 * F * 1.0; /* rho_receiver F(receiver -> emitter) Le */
     const char *depths[] = {"unlimited", "1"};
@@ -496,7 +483,7 @@ Test(pathtrace, error_falls_as_inverse_sqrt_n)
      * 1/sqrt(64) = 12%, which moves the fitted slope by about 0.03).  (c)
      * Owen-scrambled Sobol' on the same integrand converges faster than
      * N^-1/2: slope below -0.6. */
-    rp_scene *sc = load("plates-parallel.scene");
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     uint32_t rc = surface(sc, "receiver");
     double want = 0.5 * howell_parallel(1, 1, 1);
     enum { NPTS = 5, SEEDS = 32 };
@@ -594,7 +581,7 @@ Test(pathtrace, cube_ceiling_direct_is_closed_form)
      * factor, each wall rho F(wall -> ceiling) Le with C-14, the ceiling
      * its own Le (it cannot see itself).  Exact for area averages; within
      * 3 standard errors (the standard error is below 0.3% of the value). */
-    rp_scene *sc = load("cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     probe p = probe_surfaces(sc, 8, 0, "samples", "65536", "batch", "16384", "max-depth", "1", "sampler",
                              "random", NULL);
     const char *walls[] = {"wall-x0", "wall-x1", "wall-z0", "wall-z1"};
@@ -623,7 +610,7 @@ Test(pathtrace, cube_ceiling_full_depth)
      *  (b) the four walls agree (symmetry);
      *  (c) floor, ceiling and walls against the brute-force walk above
      *      (errors combined in quadrature). */
-    rp_scene *sc = load("cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     probe p = probe_surfaces(sc, 21, 0, "samples", "65536", "batch", "16384", "sampler", "random", NULL);
     const char *names[6] = {"wall-x0", "wall-x1", "floor", "ceiling", "wall-z0", "wall-z1"};
     uint32_t id[6];
@@ -659,7 +646,7 @@ Test(pathtrace, cube_ceiling_full_depth)
 
 Test(pathtrace, deterministic_for_any_thread_count)
 {
-    rp_scene *sc = load("cornell.scene");
+    rp_scene *sc = rp_test_load("scenes/cornell.scene");
     const char *samplers[] = {"random", "stratified", "sobol"};
     for (int k = 0; k < 3; k++) {
         image a = render(sc, 77, 1, "spp", "2", "sampler", samplers[k], NULL);
@@ -679,7 +666,7 @@ Test(pathtrace, deterministic_for_any_thread_count)
         image_free(&d);
     }
     rp_scene_destroy(sc);
-    sc = load("cube-ceiling.scene");
+    sc = rp_test_load("scenes/cube-ceiling.scene");
     probe p1 = probe_surfaces(sc, 5, 1, "samples", "3000", "batch", "700", NULL);
     probe p2 = probe_surfaces(sc, 5, 2, "samples", "3000", "batch", "700", NULL);
     cr_assert_eq(memcmp(p1.L, p2.L, sizeof p1.L), 0);
@@ -696,7 +683,7 @@ Test(pathtrace, cornell_camera_orientation)
      * right (the photographs' view); the light is at the top: pixels wholly
      * on it read Le = (17, 12, 4) exactly (its reflectance is 0), and no
      * pixel of the bottom quarter does. */
-    rp_scene *sc = load("cornell.scene");
+    rp_scene *sc = rp_test_load("scenes/cornell.scene");
     const rp_camera *cam = rp_scene_camera(sc);
     uint32_t W = cam->width, H = cam->height;
     image im = render(sc, 1, 0, "spp", "4", NULL);
@@ -732,7 +719,7 @@ Test(pathtrace, cornell_camera_orientation)
 
 Test(pathtrace, refuses_bad_options)
 {
-    rp_scene *sc = load("plates-parallel.scene");
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     rp_solver *s = NULL;
     rp_error err = {""};
     const char *bad[][2] = {{"sampler", "halton"}, {"spp", "0"},        {"spp", "-3"},
@@ -752,7 +739,7 @@ Test(pathtrace, no_camera_no_image)
 {
     /* A scene without a camera: render is refused as bad input, surface
      * averages still work (and equal Le on the lone emitter). */
-    rp_scene *sc = parse("bands grey\nmaterial e reflect 0 emit 2\nquad lamp e 0 0 0 1 0 0 1 1 0 0 1 0\n");
+    rp_scene *sc = rp_test_parse("bands grey\nmaterial e reflect 0 emit 2\nquad lamp e 0 0 0 1 0 0 1 1 0 0 1 0\n");
     rp_solver *s = NULL;
     rp_error err = {""};
     cr_assert_eq(try_create(sc, RP_WANT_IMAGE, 1, 0, &s, &err, NULL), RP_ERR_INPUT);
@@ -764,7 +751,7 @@ Test(pathtrace, no_camera_no_image)
 
 Test(pathtrace, progressive_counts_and_open_ended)
 {
-    rp_scene *sc = load("plates-parallel.scene");
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     const rp_camera *cam = rp_scene_camera(sc);
     double npix = (double)cam->width * cam->height;
     rp_error err = {""};

@@ -34,6 +34,7 @@
 #include <string.h>
 
 #include "geometry/scene.h"
+#include "scene_util.h"
 #include "solvers/radiosity/formfactor.h"
 #include "solvers/radiosity/system.h"
 #include "solvers/solver.h"
@@ -50,25 +51,7 @@ static void setup(void) { gsl_set_error_handler_off(); }
 
 /* ---- scenes ------------------------------------------------------------ */
 
-static rp_scene *load(const char *rel)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/%s", RP_SOURCE_DIR, rel);
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    rp_status st = rp_scene_load(path, &s, &err);
-    cr_assert_eq(st, RP_OK, "scene %s: %s", rel, err.message);
-    return s;
-}
 
-static rp_scene *parse(const char *text)
-{
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    rp_status st = rp_scene_parse(text, "radiosity.scene", NULL, &s, &err);
-    cr_assert_eq(st, RP_OK, "scene: %s", err.message);
-    return s;
-}
 
 /* ---- running a solver through its type table --------------------------- */
 
@@ -190,7 +173,7 @@ static double area_mean(const rp_scene *sc, const double *L, size_t nb, size_t b
 Test(radiosity, furnace_every_solver, .init = setup, .timeout = 120)
 {
     /* Le / (1 - rho) = 1 / 0.5 = 2 on every element. */
-    rp_scene *sc = load("scenes/furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     for (size_t k = 0; k < 4; k++) {
         rad_run r;
         char o[128];
@@ -219,7 +202,7 @@ Test(radiosity, furnace_images, .init = setup, .timeout = 120)
 {
     /* Flat and Gouraud show B / pi = 2; the final gather Le + rho/pi E with
      * every gather ray seeing B = 2 pi gives 1 + 0.5 * 2 = 2 as well. */
-    rp_scene *sc = load("scenes/furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     const rp_camera *cam = rp_scene_camera(sc);
     size_t npix = (size_t)cam->width * cam->height;
     float *img = malloc(npix * sizeof *img), *var = malloc(npix * sizeof *var);
@@ -247,7 +230,7 @@ Test(radiosity, furnace_images, .init = setup, .timeout = 120)
 
 static void sweeps_case(const char *scene_text, double rho)
 {
-    rp_scene *sc = parse(scene_text);
+    rp_scene *sc = rp_test_parse(scene_text);
     const double eps = 1e-6;
     rad_run j, g;
     rad_run_ok(&j, &rp_solver_jacobi, sc, RP_WANT_SURFACES, 0, "elements=96 tolerance=1e-6");
@@ -274,7 +257,7 @@ Test(radiosity, jacobi_residual_ratio_is_rho, .init = setup, .timeout = 120)
 {
     /* Non-uniform emission, uniform rho 0.5: the error's slowest mode is
      * the uniform one, which rho F shrinks by exactly rho. */
-    rp_scene *sc = load("scenes/cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     rad_run r;
     rp_error err = {""};
     cr_assert_eq(rad_open(&r, &rp_solver_jacobi, sc, RP_WANT_SURFACES, 0, "elements=54 tolerance=0", &err), RP_OK,
@@ -330,7 +313,7 @@ Test(radiosity, six_patch_cube_closed_form, .init = setup)
     cr_assert_eq(gsl_linalg_LU_solve(&A.matrix, p, &b.vector, &xv.vector), 0);
     gsl_permutation_free(p);
 
-    rp_scene *sc = load("scenes/cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     uint32_t ceil = rp_scene_find_surface(sc, "ceiling"), floor = rp_scene_find_surface(sc, "floor");
     for (size_t k = 0; k < 4; k++) {
         rad_run run;
@@ -355,7 +338,7 @@ Test(radiosity, energy_invariant_and_ambient, .init = setup, .timeout = 120)
 {
     /* Closed cube, rho 0.5 everywhere, Le 1 on one face of six:
      * area-mean L = mean(Le) / (1 - rho) = (1/6) / 0.5 = 1/3. */
-    rp_scene *sc = load("scenes/cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     double L[6];
     rp_error err = {""};
     rad_run r;
@@ -390,7 +373,7 @@ Test(radiosity, energy_invariant_and_ambient, .init = setup, .timeout = 120)
 
 Test(radiosity, solvers_agree_on_cornell, .init = setup, .timeout = 300)
 {
-    rp_scene *sc = load("scenes/cornell.scene");
+    rp_scene *sc = rp_test_load("scenes/cornell.scene");
     const size_t nb = 3;
     rad_run ref;
     rad_run_ok(&ref, &rp_solver_direct, sc, RP_WANT_SURFACES, 0, "elements=250");
@@ -433,7 +416,7 @@ Test(radiosity, rows_on_the_fly_equal_dense, .init = setup, .timeout = 120)
 {
     /* The same rows in the same order: bit-identical iterates; the row
      * buffer is smaller than the matrix and every sweep recomputes rows. */
-    rp_scene *sc = load("scenes/cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     rad_run a, b;
     rad_run_ok(&a, &rp_solver_jacobi, sc, RP_WANT_SURFACES, 0, "elements=96 matrix=dense tolerance=1e-9");
     rad_run_ok(&b, &rp_solver_jacobi, sc, RP_WANT_SURFACES, 0, "elements=96 matrix=rows tolerance=1e-9");
@@ -456,7 +439,7 @@ Test(radiosity, cube_ceiling_refinement, .init = setup, .timeout = 300)
 {
     /* k x k elements per face, k = 2, 3, 4, 6, against k = 16 (three
      * refinements, four meshes). */
-    rp_scene *sc = load("scenes/cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     enum { NK = 4 };
     const int ks[NK] = {2, 3, 4, 6}, kfine = 16;
     double Lf[6], L[6], errs[NK];
@@ -497,7 +480,7 @@ Test(radiosity, reciprocity_halves_the_work, .init = setup, .timeout = 120)
 {
     /* --reciprocity: pairs i < j only, mirrored; the matrix then meets
      * A_i F_ij = A_j F_ji to float rounding, and the furnace still holds. */
-    rp_scene *sc = load("scenes/furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     rad_run r;
     rad_run_ok(&r, &rp_solver_gauss_seidel, sc, RP_WANT_SURFACES, 0,
                "elements=96 ff-tolerance=1e-9 tolerance=1e-11 reciprocity");
@@ -521,7 +504,7 @@ Test(radiosity, hemicube_form_factors, .init = setup, .timeout = 120)
      * within 2% of the analytic solution on cube-ceiling, and the two
      * hemicube solvers within 1e-2 of each other (their systems differ by
      * the hemicube's departure from reciprocity). */
-    rp_scene *sc = load("scenes/cube-ceiling.scene");
+    rp_scene *sc = rp_test_load("scenes/cube-ceiling.scene");
     double La[6], Lg[6], Ls[6];
     rp_error err = {""};
     rad_run r;
@@ -556,7 +539,7 @@ Test(radiosity, divergent_system_refused, .init = setup, .timeout = 120)
      * well past 1 / 0.95 on a row.  First confirm that with the form-factor
      * module alone, then that every solver refuses rather than answering. */
     const char *text = "bands grey\nmaterial m reflect 0.95 emit 1\nbox b m 0 0 0 1 1 1 inward\n";
-    rp_scene *sc = parse(text);
+    rp_scene *sc = rp_test_parse(text);
     rp_error err = {""};
     rp_mesh *mesh;
     rp_mesh_params mp = {.size = sizeof mp, .target_count = 150};
@@ -616,7 +599,7 @@ Test(radiosity, check_row_by_hand, .init = setup)
 {
     /* Rows built by hand against the rule: rho_i sum_j F_ij < 1 and
      * sum_j rho_j F_ij < 1 (furnace, rho 0.5 everywhere). */
-    rp_scene *sc = load("scenes/furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     rad_run r;
     rp_error err = {""};
     cr_assert_eq(rad_open(&r, &rp_solver_jacobi, sc, RP_WANT_SURFACES, 0, "elements=24", &err), RP_OK);
@@ -641,7 +624,7 @@ Test(radiosity, check_row_by_hand, .init = setup)
 
 Test(radiosity, options_refused, .init = setup)
 {
-    rp_scene *sc = load("scenes/furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     rp_error err = {""};
     rad_run r;
     /* direct refuses big systems before computing anything */
@@ -659,7 +642,7 @@ Test(radiosity, options_refused, .init = setup)
                  RP_ERR_INPUT);
     rp_scene_destroy(sc);
     /* An image needs a camera. */
-    sc = parse("bands grey\nmaterial m reflect 0.5 emit 1\nbox b m 0 0 0 1 1 1 inward\n");
+    sc = rp_test_parse("bands grey\nmaterial m reflect 0.5 emit 1\nbox b m 0 0 0 1 1 1 inward\n");
     cr_assert_eq(rad_open(&r, &rp_solver_jacobi, sc, RP_WANT_IMAGE, 0, "elements=24", &err), RP_ERR_INPUT);
     rp_scene_destroy(sc);
 }
@@ -668,7 +651,7 @@ Test(radiosity, options_refused, .init = setup)
 
 Test(radiosity, same_answers_for_any_thread_count, .init = setup, .timeout = 300)
 {
-    rp_scene *sc = load("scenes/cornell.scene");
+    rp_scene *sc = rp_test_load("scenes/cornell.scene");
     const rp_camera *cam = rp_scene_camera(sc);
     size_t nv = (size_t)cam->width * cam->height * 3;
     float *img[3];

@@ -36,6 +36,7 @@
 #include <string.h>
 
 #include "geometry/scene.h"
+#include "scene_util.h"
 #include "solvers/solver.h"
 
 #define PI 3.14159265358979323846
@@ -44,25 +45,7 @@ static void setup(void) { gsl_set_error_handler_off(); }
 
 /* ---- scenes ------------------------------------------------------------ */
 
-static rp_scene *load(const char *rel)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/%s", RP_SOURCE_DIR, rel);
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    rp_status st = rp_scene_load(path, &s, &err);
-    cr_assert_eq(st, RP_OK, "scene %s: %s", rel, err.message);
-    return s;
-}
 
-static rp_scene *parse(const char *text)
-{
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    rp_status st = rp_scene_parse(text, "stochastic.scene", NULL, &s, &err);
-    cr_assert_eq(st, RP_OK, "scene: %s", err.message);
-    return s;
-}
 
 /* A closed unit cube seen from inside, each face cut into 3 x 3 square
  * patches, every patch its own surface and material (54 surfaces).  With
@@ -112,7 +95,7 @@ static rp_scene *cube_patches(int mixed, double *mean_le)
                 cr_assert(len < cap);
             }
     *mean_le = le_sum / (6.0 * g * g);
-    rp_scene *s = parse(buf);
+    rp_scene *s = rp_test_parse(buf);
     free(buf);
     return s;
 }
@@ -219,7 +202,7 @@ static void solve(run *r, const char *method, const rp_scene *sc, int threads, u
 
 Test(stochastic, furnace, .init = setup)
 {
-    rp_scene *sc = load("scenes/furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     run r;
     solve(&r, "stochastic-jacobi", sc, 0, 11, "elements=600 rays=40000 unshot=1e-12 regular=10");
     double L = r.L[0], se = r.se[0];
@@ -317,7 +300,7 @@ Test(stochastic, stderr_per_element, .init = setup)
                                                 face[f][0][c] + ui[k] * face[f][1][c] + vj[k] * face[f][2][c]);
                 len += (size_t)snprintf(text + len, sizeof text - len, "\n");
             }
-    rp_scene *sc = parse(text);
+    rp_scene *sc = rp_test_parse(text);
     run r;
     solve(&r, "stochastic-jacobi", sc, 0, 3, "max-edge=0.34 rays=20000 unshot=1e-12 regular=10");
     cr_assert_eq(r.ns, 54);
@@ -336,7 +319,7 @@ Test(stochastic, stderr_per_element, .init = setup)
 
 Test(stochastic, parallel_plates, .init = setup)
 {
-    rp_scene *sc = load("scenes/plates-parallel.scene");
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     double F = howell_parallel(1, 1, 1);
     cr_assert(fabs(F - 0.1998248957) < 1e-9, "Howell C-11 = %.10f", F);
     const double expect = 0.5 * F * 1.0; /* rho2 F21 Le1 */
@@ -369,7 +352,7 @@ Test(stochastic, parallel_plates, .init = setup)
  * seed, so +-0.05 is over 3 of those. */
 Test(stochastic, convergence_rate, .init = setup)
 {
-    rp_scene *sc = load("scenes/plates-parallel.scene");
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     const double expect = 0.5 * howell_parallel(1, 1, 1);
     uint32_t recv = rp_scene_find_surface(sc, "receiver");
     enum { NRUNS = 15 };
@@ -407,7 +390,7 @@ Test(stochastic, convergence_rate, .init = setup)
  * piecewise smooth integrand): smaller standard error at the same rays. */
 Test(stochastic, sobol_beats_random, .init = setup)
 {
-    rp_scene *sc = load("scenes/plates-parallel.scene");
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     uint32_t recv = rp_scene_find_surface(sc, "receiver");
     run r;
     solve(&r, "stochastic-jacobi", sc, 0, 9, "rays=131072 batches=32 sampler=random");
@@ -475,7 +458,7 @@ static float *render(const rp_scene *sc, const char *opts, int threads, float **
  * in nearly every pixel, one at half the truth in about 4%). */
 Test(stochastic, furnace_image, .init = setup)
 {
-    rp_scene *sc = load("scenes/furnace.scene");
+    rp_scene *sc = rp_test_load("scenes/furnace.scene");
     const rp_camera *cam = rp_scene_camera(sc);
     size_t npix = (size_t)cam->width * cam->height;
     const char *modes[] = {"flat", "gouraud"};
@@ -506,7 +489,7 @@ Test(stochastic, furnace_image, .init = setup)
  * back and empty space are black. */
 Test(stochastic, image_emitter_back_miss, .init = setup)
 {
-    rp_scene *sc = parse("bands rgb\n"
+    rp_scene *sc = rp_test_parse("bands rgb\n"
                          "material lamp reflect 0 emit 1 2 3\n"
                          "material white reflect 0.7\n"
                          /* left half of the view, facing the camera (+z) */
@@ -529,7 +512,7 @@ Test(stochastic, image_emitter_back_miss, .init = setup)
 
 Test(stochastic, deterministic_across_threads, .init = setup)
 {
-    rp_scene *sc = load("scenes/cornell.scene");
+    rp_scene *sc = rp_test_load("scenes/cornell.scene");
     const char *opts[] = {"rays=20000 batches=4 regular=2 spp=2", "rays=20000 batches=4 regular=2 spp=2 sampler=sobol"};
     for (int k = 0; k < 2; k++) {
         run a, b, c;
@@ -567,7 +550,7 @@ Test(stochastic, deterministic_across_threads, .init = setup)
 
 Test(stochastic, bad_options, .init = setup)
 {
-    rp_scene *sc = load("scenes/plates-parallel.scene");
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     const char *bad[] = {"sampler=halton", "rays=8 batches=16", "batches=1", "elements=100 max-edge=0.1",
                          "unshot=2", "reconstruct=smooth", "unshot=0 regular=0", "colour=red"};
     for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
