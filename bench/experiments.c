@@ -18,6 +18,7 @@
 #include "cli.h"
 #include "harness.h"
 #include "plot.h"
+#include "exp_internal.h"
 
 /* ------------------------------------------------------------- helpers */
 
@@ -222,12 +223,20 @@ static rp_status draw(const rp_experiment_params *p, const char *body, char *not
     return RP_OK;
 }
 
+/* A CSV number; not reached or not measured: an empty field. */
 static void fnum(FILE *f, double v)
 {
     if (isfinite(v))
         fprintf(f, "%.6g", v);
+}
+
+/* The same in gnuplot data: "?" (the plots' `set datafile missing`). */
+static void dnum(FILE *f, double v)
+{
+    if (isfinite(v))
+        fprintf(f, "%.6g", v);
     else
-        fputs("nan", f);
+        fputc('?', f);
 }
 
 /* -------------------------------------------------------------- furnace */
@@ -384,11 +393,11 @@ static rp_status exp_furnace(const rp_experiment_params *p, rp_error *err)
             for (size_t k = 0; k < nrows; k++)
                 if (rows[k].method == specs[i]) {
                     fprintf(o.f, "%g ", rows[k].rho);
-                    fnum(o.f, rows[k].reached ? rows[k].seconds : NAN);
+                    dnum(o.f, rows[k].reached ? rows[k].seconds : NAN);
                     fputc(' ', o.f);
-                    fnum(o.f, rows[k].reached ? rows[k].sweeps : NAN);
+                    dnum(o.f, rows[k].reached ? rows[k].sweeps : NAN);
                     fputc(' ', o.f);
-                    fnum(o.f, rows[k].theory_sweeps);
+                    dnum(o.f, rows[k].theory_sweeps);
                     fputc('\n', o.f);
                 }
             fputs("\n\n", o.f);
@@ -475,7 +484,7 @@ static rp_status exp_furnace(const rp_experiment_params *p, rp_error *err)
 
 /* Howell's catalog C-11: parallel, directly opposed rectangles a x b at
  * distance c (data/ground-truth.md). */
-static double howell_parallel(double a, double b, double c)
+double howell_parallel(double a, double b, double c)
 {
     double X = a / c, Y = b / c;
     double t = 0.5 * log((1 + X * X) * (1 + Y * Y) / (1 + X * X + Y * Y)) +
@@ -486,7 +495,7 @@ static double howell_parallel(double a, double b, double c)
 
 /* C-14: perpendicular rectangles with a common edge of length l, from A1
  * (width w) to A2 (height h). */
-static double howell_perpendicular(double w, double h, double l)
+double howell_perpendicular(double w, double h, double l)
 {
     double W = w / l, H = h / l, W2 = W * W, H2 = H * H, S = sqrt(H2 + W2);
     double g = (1 + W2) * (1 + H2) / (1 + W2 + H2) * pow(W2 * (1 + W2 + H2) / ((1 + W2) * (W2 + H2)), W2) *
@@ -665,7 +674,7 @@ static rp_status exp_formfactors(const rp_experiment_params *p, rp_error *err)
             unsigned ns = mi == 1 ? mc_seeds : 1;
             st = ff_measure(&su, &prm, ns, &F, &e, &secs, err);
             if (st == RP_OK) {
-                fprintf(csv.f, "distance,parallel,%g,%s,default,nan,%.10f,%.10f,%.4g,%.4g,%u\n", dist[d],
+                fprintf(csv.f, "distance,parallel,%g,%s,default,,%.10f,%.10f,%.4g,%.4g,%u\n", dist[d],
                         rp_ff_method_name(methods[mi]), su.exact, F, e, secs, ns);
                 fprintf(dat.f, "%g %.10f %.6g\n", dist[d], su.exact, e > 1e-16 ? e : 1e-16);
             }
@@ -1038,6 +1047,132 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
     return rp_out_close(&o, 1, err);
 }
 
+/* Issue 5's comparison: the form factors each method computes to reach a
+ * surface-average error (RMS over surfaces and bands of the relative error
+ * against the reference's surface averages), uniform Gauss-Seidel at a
+ * fixed mesh against hierarchical radiosity as --bf-epsilon shrinks.
+ * Appends a table to report.md and writes form_factors.csv. */
+typedef struct ffrow {
+    char spec[64];
+    double form_factors, error, seconds;
+} ffrow;
+
+static rp_status hierarchy_solve(const rp_scene *scene, const rp_reference *ref, const rp_solver_type *t,
+                                 const char *key, const char *value, int threads, ffrow *row, rp_error *err)
+{
+    const char *keys[1] = {key}, *values[1] = {value};
+    rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = threads, .keys = keys,
+                    .values = values, .count = 1};
+    size_t ns = rp_scene_nsurfaces(scene), nb = rp_scene_nbands(scene);
+    double *x = calloc(ns * nb, sizeof *x);
+    if (!x)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    rp_solver *s = NULL;
+    double t0 = rp_clock();
+    rp_status st = rp_solver_create(t, scene, &o, &s, err);
+    row->form_factors = 0;
+    for (int i = 0; st == RP_OK && i < 100000; i++) {
+        rp_step_info info;
+        memset(&info, 0, sizeof info);
+        st = rp_solver_step(s, &info, err);
+        row->form_factors += info.form_factors;
+        if (st == RP_OK && info.converged)
+            break;
+    }
+    row->seconds = rp_clock() - t0;
+    if (st == RP_OK) {
+        rp_estimate e = {.surface_radiance = x};
+        st = rp_solver_estimate(s, &e, err);
+    }
+    if (st == RP_OK)
+        row->error = rp_metrics_surface_error(x, ref->surface_radiance, ref->surface_mask, ns, nb, NULL);
+    snprintf(row->spec, sizeof row->spec, "%.20s:%.20s=%.20s", t->name, key, value);
+    rp_solver_destroy(s);
+    free(x);
+    return st;
+}
+
+static rp_status hierarchy_form_factors(const rp_experiment_params *p, const rp_scene *scene,
+                                        const rp_reference *ref, rp_error *err)
+{
+    const rp_solver_type *gs = rp_solver_lookup("gauss-seidel");
+    if (!gs || !ref->surface_radiance)
+        return RP_OK;
+    static const char *bf_full[] = {"0.04", "0.03", "0.02", "0.015", "0.01"};
+    static const char *bf_quick[] = {"0.05", "0.02"};
+    const char *const *bf = p->quick ? bf_quick : bf_full;
+    size_t n = p->quick ? 2 : 5;
+    const char *elements = p->quick ? "1200" : "4800";
+    ffrow rows[6];
+    rp_status st = hierarchy_solve(scene, ref, gs, "elements", elements, p->threads, &rows[0], err);
+    for (size_t k = 0; k < n && st == RP_OK; k++)
+        st = hierarchy_solve(scene, ref, &rp_solver_hierarchical, "bf-epsilon", bf[k], p->threads, &rows[k + 1],
+                             err);
+    if (st != RP_OK)
+        return st;
+    if (p->log)
+        for (size_t k = 0; k <= n; k++) {
+            char line[256];
+            snprintf(line, sizeof line, "  %.63s: %.4g form factors, surface error %.3f%%, %.2f s", rows[k].spec,
+                     rows[k].form_factors, 100 * rows[k].error, rows[k].seconds);
+            p->log(p->log_ctx, line);
+        }
+    char path[1200];
+    rp_out o;
+    if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "form_factors.csv"), err)) != RP_OK)
+        return st;
+    fprintf(o.f, "spec,form_factors,surface_error,seconds\n");
+    for (size_t k = 0; k <= n; k++)
+        fprintf(o.f, "%s,%.0f,%.6g,%.4f\n", rows[k].spec, rows[k].form_factors, rows[k].error, rows[k].seconds);
+    if ((st = rp_out_close(&o, 1, err)) != RP_OK)
+        return st;
+    /* report.md as rp_bench_write left it, plus this section (rewritten
+     * whole, through a temporary file). */
+    rp_path_join(path, sizeof path, p->out_dir, "report.md");
+    char *old = NULL;
+    size_t len = 0;
+    FILE *f = fopen(path, "rb");
+    if (f) {
+        if (fseek(f, 0, SEEK_END) == 0) {
+            long m = ftell(f);
+            if (m > 0 && (old = malloc((size_t)m)) != NULL) {
+                rewind(f);
+                len = fread(old, 1, (size_t)m, f);
+            }
+        }
+        fclose(f);
+    }
+    if ((st = rp_out_open(&o, path, err)) != RP_OK) {
+        free(old);
+        return st;
+    }
+    if (old)
+        fwrite(old, 1, len, o.f);
+    free(old);
+    fprintf(o.f,
+            "\n## Form factors to reach the uniform solution's surface error\n\n"
+            "Each row is one converged solve. Surface error: RMS over surfaces and bands of the relative "
+            "error of the surface averages against the reference's (itself uncertain by %.2f%% RMS, which "
+            "adds in quadrature to every row). Form factors: the sum of `rp_step_info.form_factors` (the "
+            "uniform solver counts every element pair, the hierarchical one every link it estimated, kept or "
+            "not).\n\n| method | form factors | surface error | ratio to uniform | seconds |\n|---|---|---|---|---|\n",
+            100 * ref->surface_rel_se);
+    const ffrow *best = NULL;
+    for (size_t k = 0; k <= n; k++) {
+        fprintf(o.f, "| `%s` | %.4g | %.3f%% | %.3f | %.2f |\n", rows[k].spec, rows[k].form_factors,
+                100 * rows[k].error, rows[k].form_factors / rows[0].form_factors, rows[k].seconds);
+        if (k > 0 && rows[k].error <= rows[0].error && (!best || rows[k].form_factors < best->form_factors))
+            best = &rows[k];
+    }
+    if (best)
+        fprintf(o.f, "\nCheapest hierarchical run at or below the uniform error: `%s`, %.1f%% of the uniform "
+                     "solver's form factors.\n",
+                best->spec, 100 * best->form_factors / rows[0].form_factors);
+    else
+        fprintf(o.f, "\nNo hierarchical run reached the uniform solver's surface error.\n");
+    return rp_out_close(&o, 1, err);
+}
+
 static rp_status exp_hierarchy(const rp_experiment_params *p, rp_error *err)
 {
     const rp_solver_type *t = rp_solver_lookup("hierarchical");
@@ -1059,9 +1194,13 @@ static rp_status exp_hierarchy(const rp_experiment_params *p, rp_error *err)
                            .preface = "Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991) against the "
                                       "classic solvers at equal time on the Cornell box.",
                            .sheet = 1, .command = p->command};
-    st = run_bench(p, scene, path, list, budget, 1, REF_SPP(p), &out, p->out_dir, NULL, NULL, err);
+    rp_reference *ref = NULL;
+    st = run_bench(p, scene, path, list, budget, 1, REF_SPP(p), &out, p->out_dir, NULL, &ref, err);
+    if (st == RP_OK)
+        st = hierarchy_form_factors(p, scene, ref, err);
     if (st == RP_OK)
         st = hierarchy_links(p, scene, err);
+    rp_reference_destroy(ref);
     rp_scene_destroy(scene);
     return st;
 }
@@ -1080,11 +1219,13 @@ static const rp_experiment experiments[] = {
      exp_progressive},
     {"hierarchy", "hierarchical radiosity against the classic solvers, and links against leaves as bf-epsilon "
                   "shrinks (when registered)", exp_hierarchy},
+    {"stability", "the stability atlas: each method pushed past its comfort zone (reflectance near 1, tiny lights, "
+                  "corners, contact, shadows, thin geometry, non-physical input)", rp_exp_stability},
 };
 
 static const rp_experiment *const experiment_list[] = {&experiments[0], &experiments[1], &experiments[2],
                                                        &experiments[3], &experiments[4], &experiments[5],
-                                                       &experiments[6], NULL};
+                                                       &experiments[6], &experiments[7], NULL};
 
 const rp_experiment *const *rp_experiments(void) { return experiment_list; }
 

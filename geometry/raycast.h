@@ -34,6 +34,15 @@ void rp_raycast_destroy(rp_raycast *rc);
 /* The self-intersection epsilon, scaled to the scene. */
 double rp_raycast_epsilon(const rp_raycast *rc);
 
+/* The default offset, relative to the scene diagonal (see raycast.c). */
+#define RP_RAYCAST_DEFAULT_OFFSET 1e-5
+
+/* Sets the self-intersection epsilon to rel times the scene diagonal
+ * (rel >= 0; 0 starts rays on the surface itself, which lets them re-hit
+ * it: "acne").  For experiments (radpt experiment stability); call before
+ * the raycaster is shared between threads. */
+void rp_raycast_set_offset(rp_raycast *rc, double rel);
+
 /* Closest hit along o + t d, t in (0, tmax]; d need not be unit.
  * Returns 1 and fills hit on a hit, 0 on a miss. */
 int rp_ray_closest(const rp_raycast *rc, rp_vec3 o, rp_vec3 d, double tmax, rp_hit *hit);

@@ -2,6 +2,8 @@
  * gsl_root_fsolver_alloc / _iterate / _free around a const type). */
 #include "solver.h"
 
+#include "../geometry/raycast.h"
+
 #include <errno.h>
 #include <math.h>
 #include <stdlib.h>
@@ -127,4 +129,182 @@ rp_status rp_options_check(const rp_options *o, const rp_solver_type *type, rp_e
                                 type->name, o->keys[i], type->name);
     }
     return RP_OK;
+}
+
+/* ---------------------------------------------------- checkpoint/resume */
+
+#define RP_STATE_MAGIC "RPSTATE1"
+/* Sanity bounds on a record's fields before trusting them to malloc. */
+#define RP_STATE_MAX_NAME 256
+#define RP_STATE_MAX_BYTES (UINT64_C(1) << 40)
+
+static uint64_t fnv1a64(const unsigned char *p, size_t n)
+{
+    /* FNV-1a, 64 bits (Fowler, Noll & Vo) */
+    uint64_t h = UINT64_C(0xcbf29ce484222325);
+    for (size_t i = 0; i < n; i++) {
+        h ^= p[i];
+        h *= UINT64_C(0x100000001b3);
+    }
+    return h;
+}
+
+int rp_solver_put_u64(FILE *f, const uint64_t *v, size_t n)
+{
+    unsigned char buf[8 * 256];
+    while (n > 0) {
+        size_t k = n < 256 ? n : 256;
+        for (size_t i = 0; i < k; i++)
+            for (int b = 0; b < 8; b++)
+                buf[8 * i + (size_t)b] = (unsigned char)(v[i] >> (8 * b));
+        if (fwrite(buf, 8, k, f) != k)
+            return -1;
+        v += k;
+        n -= k;
+    }
+    return 0;
+}
+
+int rp_solver_get_u64(FILE *f, uint64_t *v, size_t n)
+{
+    unsigned char buf[8 * 256];
+    while (n > 0) {
+        size_t k = n < 256 ? n : 256;
+        if (fread(buf, 8, k, f) != k)
+            return -1;
+        for (size_t i = 0; i < k; i++) {
+            uint64_t x = 0;
+            for (int b = 7; b >= 0; b--)
+                x = x << 8 | buf[8 * i + (size_t)b];
+            v[i] = x;
+        }
+        v += k;
+        n -= k;
+    }
+    return 0;
+}
+
+/* Doubles travel as their IEEE 754 bit patterns, so a value read back is
+ * bit-identical to the one written. */
+int rp_solver_put_f64(FILE *f, const double *v, size_t n)
+{
+    uint64_t u[256];
+    while (n > 0) {
+        size_t k = n < 256 ? n : 256;
+        memcpy(u, v, k * sizeof *u);
+        if (rp_solver_put_u64(f, u, k) != 0)
+            return -1;
+        v += k;
+        n -= k;
+    }
+    return 0;
+}
+
+int rp_solver_get_f64(FILE *f, double *v, size_t n)
+{
+    uint64_t u[256];
+    while (n > 0) {
+        size_t k = n < 256 ? n : 256;
+        if (rp_solver_get_u64(f, u, k) != 0)
+            return -1;
+        memcpy(v, u, k * sizeof *u);
+        v += k;
+        n -= k;
+    }
+    return 0;
+}
+
+int rp_solver_can_checkpoint(const rp_solver_type *type)
+{
+    return type && type->save && type->load;
+}
+
+static rp_status no_checkpoint(const rp_solver_type *type, rp_error *err)
+{
+    return rp_error_set(err, RP_ERR_UNSUPPORTED, "method %s cannot be checkpointed or resumed (only pathtrace can)",
+                        type->name);
+}
+
+/* The method writes its fields to a memory stream first, so that the record
+ * can carry their length and checksum ahead of / after them. */
+rp_status rp_solver_save(const rp_solver *s, FILE *f, rp_error *err)
+{
+    if (!rp_solver_can_checkpoint(s->type))
+        return no_checkpoint(s->type, err);
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *mem = open_memstream(&buf, &len);
+    if (!mem)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory for the solver state");
+    rp_status st = s->type->save(s->state, mem, err);
+    if (fclose(mem) != 0 && st == RP_OK)
+        st = rp_error_set(err, RP_ERR_NOMEM, "out of memory for the solver state");
+    if (st == RP_OK) {
+        size_t nlen = strlen(s->type->name);
+        uint64_t head[1] = {nlen}, tail[2] = {len, fnv1a64((const unsigned char *)buf, len)};
+        int bad = fwrite(RP_STATE_MAGIC, 1, 8, f) != 8;
+        bad = bad || rp_solver_put_u64(f, head, 1) != 0;
+        bad = bad || fwrite(s->type->name, 1, nlen, f) != nlen;
+        bad = bad || rp_solver_put_u64(f, &tail[0], 1) != 0;
+        bad = bad || (len && fwrite(buf, 1, len, f) != len);
+        bad = bad || rp_solver_put_u64(f, &tail[1], 1) != 0;
+        if (bad)
+            st = rp_error_set(err, RP_ERR_RUNTIME, "writing the solver state failed");
+    }
+    free(buf);
+    return st;
+}
+
+rp_status rp_solver_load(rp_solver *s, FILE *f, rp_step_info *info, rp_error *err)
+{
+    memset(info, 0, sizeof *info);
+    info->residual = -1;
+    info->unshot = -1;
+    if (!rp_solver_can_checkpoint(s->type))
+        return no_checkpoint(s->type, err);
+    char magic[8], name[RP_STATE_MAX_NAME + 1];
+    uint64_t nlen, len, sum;
+    if (fread(magic, 1, 8, f) != 8 || memcmp(magic, RP_STATE_MAGIC, 8) != 0)
+        return rp_error_set(err, RP_ERR_INPUT, "no solver state record (bad magic)");
+    if (rp_solver_get_u64(f, &nlen, 1) != 0 || nlen > RP_STATE_MAX_NAME || fread(name, 1, nlen, f) != nlen)
+        return rp_error_set(err, RP_ERR_INPUT, "solver state record truncated or corrupt (method name)");
+    name[nlen] = '\0';
+    if (strcmp(name, s->type->name) != 0)
+        return rp_error_set(err, RP_ERR_INPUT, "the state is method %s's, not %s's", name, s->type->name);
+    if (rp_solver_get_u64(f, &len, 1) != 0 || len > RP_STATE_MAX_BYTES)
+        return rp_error_set(err, RP_ERR_INPUT, "solver state record truncated or corrupt (length)");
+    char *buf = malloc(len ? (size_t)len : 1);
+    if (!buf)
+        return rp_error_set(err, RP_ERR_INPUT, "solver state record corrupt (length %llu bytes)",
+                            (unsigned long long)len);
+    rp_status st = RP_OK;
+    if (fread(buf, 1, (size_t)len, f) != len || rp_solver_get_u64(f, &sum, 1) != 0)
+        st = rp_error_set(err, RP_ERR_INPUT, "solver state truncated (%llu bytes of fields expected)",
+                          (unsigned long long)len);
+    else if (sum != fnv1a64((const unsigned char *)buf, (size_t)len))
+        st = rp_error_set(err, RP_ERR_INPUT, "solver state corrupt (checksum mismatch)");
+    FILE *mem = NULL;
+    if (st == RP_OK && !(mem = fmemopen(buf, len ? (size_t)len : 1, "rb")))
+        st = rp_error_set(err, RP_ERR_NOMEM, "out of memory for the solver state");
+    if (st == RP_OK) {
+        st = s->type->load(s->state, mem, info, err);
+        if (st == RP_OK && (uint64_t)ftell(mem) != len)
+            st = rp_error_set(err, RP_ERR_INPUT, "solver state has %llu bytes the method did not read",
+                              (unsigned long long)(len - (uint64_t)ftell(mem)));
+    }
+    if (mem)
+        fclose(mem);
+    free(buf);
+    return st;
+}
+
+rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_error *err)
+{
+    if (!rp_options_get(o, "ray-offset"))
+        return RP_OK;
+    double rel = RP_RAYCAST_DEFAULT_OFFSET;
+    rp_status st = rp_options_double(o, "ray-offset", 0, 0.1, &rel, err);
+    if (st == RP_OK)
+        rp_raycast_set_offset(rc, rel);
+    return st;
 }

@@ -10,6 +10,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include "../geometry/scene.h"
 #include "../geometry/status.h"
@@ -85,6 +86,16 @@ typedef struct rp_solver_type {
     rp_status (*step)(void *state, rp_step_info *info, rp_error *err);
     rp_status (*estimate)(const void *state, rp_estimate *estimate, rp_error *err);
     void (*fini)(void *state);
+    /* Optional (NULL: the method cannot be checkpointed).  save writes the
+     * state accumulated so far to f as the method's own little-endian
+     * fields; load reads them back into a state fresh from init with the
+     * same scene and options (RP_ERR_INPUT, naming what differs, when they
+     * do not match, or when f is truncated), and reports in info what a
+     * step would: converged, progress and iterations so far.  Neither
+     * opens, names or closes f: bench/ owns files.  Call them through
+     * rp_solver_save / rp_solver_load, which frame and checksum the fields. */
+    rp_status (*save)(const void *state, FILE *f, rp_error *err);
+    rp_status (*load)(void *state, FILE *f, rp_step_info *info, rp_error *err);
 } rp_solver_type;
 
 /* A solver instance: its type and its state. */
@@ -104,6 +115,25 @@ const rp_solver_type *rp_solver_type_of(const rp_solver *s);
 const void *rp_solver_state(const rp_solver *s);
 void rp_solver_destroy(rp_solver *s);
 
+/* Checkpoint and resume (optional per method, see save / load above).
+ * rp_solver_save appends one record to f: magic "RPSTATE1", the method's
+ * name, the length of the method's fields, the fields, and their 64-bit
+ * FNV-1a checksum, all little-endian.  rp_solver_load reads one record
+ * back into s, which must be fresh from rp_solver_create; a record of
+ * another method, a bad checksum or a short file is RP_ERR_INPUT.  Both are
+ * RP_ERR_UNSUPPORTED for a method without save / load.  After a failed load
+ * the solver's state is undefined: destroy it. */
+int rp_solver_can_checkpoint(const rp_solver_type *type);
+rp_status rp_solver_save(const rp_solver *s, FILE *f, rp_error *err);
+rp_status rp_solver_load(rp_solver *s, FILE *f, rp_step_info *info, rp_error *err);
+
+/* Little-endian field helpers for methods' save / load: n values each;
+ * they return -1 on a write error or a short read, else 0. */
+int rp_solver_put_u64(FILE *f, const uint64_t *v, size_t n);
+int rp_solver_put_f64(FILE *f, const double *v, size_t n);
+int rp_solver_get_u64(FILE *f, uint64_t *v, size_t n);
+int rp_solver_get_f64(FILE *f, double *v, size_t n);
+
 /* Option look-up for methods: the value given for name, or NULL. */
 const char *rp_options_get(const rp_options *o, const char *name);
 /* Parses a numeric option into *out (left alone when absent); a malformed
@@ -114,5 +144,17 @@ rp_status rp_options_uint(const rp_options *o, const char *name, unsigned long l
                           unsigned long hi, unsigned long *out, rp_error *err);
 /* RP_ERR_INPUT if an option is not in the type's spec list. */
 rp_status rp_options_check(const rp_options *o, const rp_solver_type *type, rp_error *err);
+
+/* --ray-offset EPS: the self-intersection offset of rays leaving a surface,
+ * relative to the scene diagonal (geometry/raycast.h); methods that cast
+ * rays list it and apply it to their raycaster.  Absent, the raycaster
+ * keeps its default (bit-identical to not having the option). */
+#define RP_RAY_OFFSET_OPTION                                                                 \
+    {"ray-offset", "EPS",                                                                    \
+     "self-intersection offset of rays leaving a surface, relative to the scene diagonal "  \
+     "(0: none; for experiments on acne and leaks)",                                        \
+     "1e-5"}
+struct rp_raycast;
+rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_error *err);
 
 #endif

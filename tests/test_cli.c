@@ -82,27 +82,38 @@ Test(cli, unknown_method_lists_the_known_ones)
 
 Test(cli, usage_errors_exit_2)
 {
+    /* Outputs go to a fresh directory, so a file left by anyone else
+     * cannot stand in for (or hide) one written by a refused run. */
+    char dir[] = "/tmp/radpt-usage-XXXXXX";
+    cr_assert_not_null(mkdtemp(dir));
     const char *cases[] = {
         "",
         "frobnicate scenes/cornell.scene",
         "info",
         "info scenes/cornell.scene --bogus",
-        "render scenes/cornell.scene -o /tmp/x.exr",
+        "render scenes/cornell.scene -o @/x.exr",
         "render scenes/cornell.scene --method pathtrace",
-        "render scenes/cornell.scene --method pathtrace --threads 0 -o /tmp/x.exr",
-        "render scenes/cornell.scene --method pathtrace --time -3 -o /tmp/x.exr",
-        "render scenes/cornell.scene --method pathtrace --seed banana -o /tmp/x.exr",
-        "render scenes/cornell.scene --method pathtrace --spp 0 -o /tmp/x.exr",
-        "render scenes/cornell.scene --method pathtrace --no-such-option 3 -o /tmp/x.exr",
+        "render scenes/cornell.scene --method pathtrace --threads 0 -o @/x.exr",
+        "render scenes/cornell.scene --method pathtrace --time -3 -o @/x.exr",
+        "render scenes/cornell.scene --method pathtrace --seed banana -o @/x.exr",
+        "render scenes/cornell.scene --method pathtrace --spp 0 -o @/x.exr",
+        "render scenes/cornell.scene --method pathtrace --no-such-option 3 -o @/x.exr",
         "probe scenes/cornell.scene --method pathtrace",
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        rp_run r = rp_run_radpt(cases[i]);
+        char cmd[512], *at;
+        snprintf(cmd, sizeof cmd, "%s", cases[i]);
+        if ((at = strchr(cmd, '@')) != NULL) /* @ stands for the directory */
+            snprintf(at, sizeof cmd - (size_t)(at - cmd), "%s/x.exr", dir);
+        rp_run r = rp_run_radpt(cmd);
         cr_expect_eq(r.status, 2, "'%s' exited %d; stderr: %s", cases[i], r.status, r.err);
         cr_expect(r.err[0] != '\0', "'%s' says nothing on stderr", cases[i]);
         rp_run_free(&r);
     }
-    cr_expect(access("/tmp/x.exr", F_OK) != 0, "no output file from a refused run");
+    char out[64];
+    snprintf(out, sizeof out, "%s/x.exr", dir);
+    cr_expect(access(out, F_OK) != 0, "no output file from a refused run");
+    cr_expect_eq(rmdir(dir), 0, "%s holds a file from a refused run", dir);
 }
 
 Test(cli, help_lists_commands_and_methods)

@@ -1,5 +1,6 @@
 /* Hierarchical radiosity: answers in the common space (solver.h) from the
- * leaves of the quadtrees.
+ * leaves of the quadtrees; the camera loop is the uniform solvers'
+ * (rp_recon_camera), with the shading below.
  *
  * Surface averages are the area-weighted leaf radiosities over pi.
  *
@@ -27,8 +28,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../../geometry/camera.h"
 #include "hier_internal.h"
+#include "reconstruct.h"
 
 void hier_surfaces(const hier_state *s, double *out)
 {
@@ -296,41 +297,15 @@ void hier_vertices_eval(const hier_state *s, const hier_vertices *v, uint32_t fa
 
 /* ---- the image ---- */
 
-/* Stratified positions of n samples in the unit square: a jittered
- * sqrt(n) x sqrt(n) grid when n is a square, else n-rooks. */
-static void strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
-{
-    unsigned m = (unsigned)floor(sqrt((double)n) + 0.5);
-    if (m * m == n) {
-        for (unsigned k = 0; k < n; k++) {
-            xy[2 * k] = ((k % m) + hier_u01(key, 2 * (uint64_t)k)) / m;
-            xy[2 * k + 1] = ((k / m) + hier_u01(key, 2 * (uint64_t)k + 1)) / m;
-        }
-        return;
-    }
-    for (unsigned k = 0; k < n; k++)
-        perm[k] = k;
-    for (unsigned k = n; k > 1; k--) {
-        unsigned j = (unsigned)(hier_u01(key, 2 * (uint64_t)n + k) * k);
-        j = j < k ? j : k - 1;
-        uint32_t tmp = perm[k - 1];
-        perm[k - 1] = perm[j];
-        perm[j] = tmp;
-    }
-    for (unsigned k = 0; k < n; k++) {
-        xy[2 * k] = (perm[k] + hier_u01(key, 2 * (uint64_t)k)) / n;
-        xy[2 * k + 1] = (k + hier_u01(key, 2 * (uint64_t)k + 1)) / n;
-    }
-}
-
 typedef struct img_job {
     const hier_state *s;
     const hier_vertices *hv;
 } img_job;
 
-static void shade(const img_job *j, const rp_hit *h, uint64_t key, double *xyg, uint32_t *perm, double *L,
+static void shade(const void *ctx, const rp_hit *h, uint64_t key, double *xyg, uint32_t *perm, double *L,
                   unsigned long long *rays)
 {
+    const img_job *j = ctx;
     const hier_state *s = j->s;
     const size_t nb = s->nb;
     for (size_t b = 0; b < nb; b++)
@@ -358,7 +333,7 @@ static void shade(const img_job *j, const rp_hit *h, uint64_t key, double *xyg, 
         double acc[HIER_MAX_BANDS];
         for (size_t b = 0; b < nb; b++)
             acc[b] = 0;
-        strata(key, G, perm, xyg);
+        rp_recon_strata(key, G, perm, xyg);
         rp_vec3 t, bt;
         rp_v3_basis(h->n, &t, &bt);
         for (unsigned k = 0; k < G; k++) {
@@ -383,11 +358,8 @@ static void shade(const img_job *j, const rp_hit *h, uint64_t key, double *xyg, 
 
 rp_status hier_image(const hier_state *s, float *out, float *variance, double *rays, rp_error *err)
 {
-    const rp_camera *cam = rp_scene_camera(s->scene);
-    if (!cam)
+    if (!rp_scene_camera(s->scene))
         return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
-    rp_camera_frame frame;
-    rp_camera_frame_init(&frame, cam);
     const size_t nb = s->nb;
     img_job job = {.s = s};
     hier_vertices *hv = NULL;
@@ -397,63 +369,8 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
             return st;
         job.hv = hv;
     }
-    const uint32_t W = cam->width, H = cam->height;
-    const unsigned spp = s->spp;
-    const unsigned G = s->recon == HIER_RECON_GATHER ? s->gather_rays : 1;
-    const unsigned nperm = spp > G ? spp : G;
-    unsigned long long nrays = 0;
-    int failed = 0;
-#pragma omp parallel num_threads(s->threads) reduction(+ : nrays)
-    {
-        double *xy = malloc(2 * (size_t)spp * sizeof *xy);
-        double *xyg = malloc(2 * (size_t)G * sizeof *xyg);
-        uint32_t *perm = malloc((size_t)nperm * sizeof *perm);
-        if (!xy || !xyg || !perm) {
-#pragma omp atomic write
-            failed = 1;
-        }
-#pragma omp for schedule(dynamic, 1)
-        for (long y = 0; y < (long)H; y++) {
-            if (!xy || !xyg || !perm)
-                continue;
-            double L[HIER_MAX_BANDS], sum[HIER_MAX_BANDS], sq[HIER_MAX_BANDS];
-            for (uint32_t x = 0; x < W; x++) {
-                uint64_t pix = (uint64_t)y * W + x;
-                strata(hier_key(s->seed, pix, 0), spp, perm, xy);
-                for (size_t b = 0; b < nb; b++)
-                    sum[b] = sq[b] = 0;
-                for (unsigned k = 0; k < spp; k++) {
-                    rp_vec3 d = rp_camera_direction(&frame, x + xy[2 * k], (double)y + xy[2 * k + 1]);
-                    rp_hit h;
-                    nrays++;
-                    if (!rp_ray_closest(s->rc, frame.eye, d, INFINITY, &h))
-                        continue; /* a miss is black */
-                    shade(&job, &h, hier_key(s->seed, pix, (uint64_t)k + 1), xyg, perm, L, &nrays);
-                    for (size_t b = 0; b < nb; b++) {
-                        sum[b] += L[b];
-                        sq[b] += L[b] * L[b];
-                    }
-                }
-                float *o = out + pix * nb;
-                for (size_t b = 0; b < nb; b++)
-                    o[b] = (float)(sum[b] / spp);
-                if (variance) {
-                    float *v = variance + pix * nb;
-                    for (size_t b = 0; b < nb; b++) {
-                        double var = spp > 1 ? (sq[b] - sum[b] * sum[b] / spp) / (spp - 1) / spp : INFINITY;
-                        v[b] = (float)(var > 0 ? var : 0);
-                    }
-                }
-            }
-        }
-        free(xy);
-        free(xyg);
-        free(perm);
-    }
-    if (failed)
-        st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image scratch");
-    else if (rays)
-        *rays += (double)nrays;
+    const rp_recon_shader shader = {shade, &job, s->recon == HIER_RECON_GATHER ? s->gather_rays : 1};
+    st = rp_recon_camera(s->scene, s->rc, s->spp, s->seed, s->threads, nb, &shader, out, variance, rays, err);
     hier_vertices_destroy(hv);
     return st;
 }

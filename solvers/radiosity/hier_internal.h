@@ -55,6 +55,9 @@ typedef struct hier_link {
     float F_err;     /* the oracle's form-factor bound (unoccluded estimate
                         for partial or straddling links) */
     uint32_t flags;
+    float frac[4];   /* shares of the source's four children in the kernel
+                        seen from the receiver's centre; frac[0] < 0 until
+                        the source has children (hierarchical.c) */
 } hier_link;
 
 /* What is fixed per scene face. */
@@ -97,11 +100,21 @@ typedef struct hier_state {
     double *Bd;          /* nnodes x nb: gathered radiosity pushed down from ancestors */
     double *W;           /* nnodes: weight in the pull, the area of the leaves
                             below that some link reaches (see hier_sweep) */
+    /* Row-sum normalisation in an enclosure (hierarchical.c, hier_sweep):
+     * enclosure is 1 when every ray leaving a front lands on a front, so
+     * the exact form factors of any element sum to 1; ff_scale[i] is then
+     * 1 / (the form factors reaching leaf i through its own and its
+     * ancestors' links), 1 elsewhere. */
+    int enclosure;
+    double *ff_scale;
+    size_t cap_scale;
 
     hier_link *links;    /* sorted by receiver after every refinement pass */
     size_t nlinks, cap_links;
     uint32_t *link_start; /* nnodes + 1 offsets into links (CSR by receiver) */
     size_t cap_start;
+    hier_link *spare;    /* the previous list, reused by the next sort */
+    size_t cap_spare;
 
     /* Shaft culling (Haines & Wallace 1994): for each pair of faces, the
      * faces that may block a segment between them. */
@@ -115,6 +128,7 @@ typedef struct hier_state {
     double bf_rel, min_area_rel;   /* as given: relative */
     double bf_eps, min_area;       /* absolute */
     double partial_weight;
+    double invisible_weight;
     double tolerance;
     int tolerance_given;
     unsigned long max_iterations;

@@ -25,17 +25,22 @@
  * are refined first; and for a fully visible link from a pure emitter
  * (uniform, with the contour integral exact over it) the kernel's
  * variation across q, with only q split.  A link whose rays were all
- * blocked is refined like a visible one (16 blocked rays between large
- * elements can miss a penumbra) and dropped once the oracle lets it be.
+ * blocked is refined with invisible_weight times its unoccluded form
+ * factor (16 blocked rays between large elements can miss a penumbra, but
+ * only a small part of one) and dropped once the oracle lets it be.
  * When a receiver is split its near links go down with it, re-evaluated
  * at the children: a near source's kernel varies across the receiver, and
  * an estimate at the parent's centre pushed down unchanged would give the
  * children next to the source too little and the others too much.
  *
  * Refinement runs breadth first: the decisions and the new links' form
- * factors are computed in parallel, and nodes are created in link order in
- * between, so node numbers, link order and every random number (keyed by
- * the seed and the two node numbers) are the same for any thread count. */
+ * factors are computed in parallel, and nodes are created serially in a
+ * fixed order in between (the order of the links split), so node numbers,
+ * link order and every random number (keyed by the seed and the two node
+ * numbers) are the same for any thread count.  Only new links are judged
+ * again within a pass, and a pass that splits nothing leaves the stored
+ * links untouched (each step runs one pass, most of them idle near
+ * convergence). */
 #include <math.h>
 #include <omp.h>
 #include <stdlib.h>
@@ -298,6 +303,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
     }
     out->recv = qi;
     out->src = pi;
+    out->frac[0] = -1;
     out->F = F * vis;
     if (flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE))
         out->F_err = (float)(s->partial_weight * Fmax);
@@ -308,9 +314,12 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
     else
         out->F_err = (float)Fmax;
     if (flags & HIER_LINK_INVISIBLE)
-        /* Refined (towards a penumbra it may hide) as an unoccluded link
-         * would be, not with the partial links' extra weight. */
-        out->F_err = (float)Fmax;
+        /* Refined towards a penumbra it may hide, but with the weight
+         * --invisible-weight (default 1/4 = 1/sqrt(16)): N stratified rays
+         * that were all blocked leave a visible fraction of about
+         * 1/sqrt(N) undetected at most, not the whole unoccluded form
+         * factor. */
+        out->F_err = (float)(s->invisible_weight * Fmax);
     out->flags = flags;
     return vis > 0 ? 1 : 2;
 }
@@ -332,9 +341,10 @@ static rp_status reserve_links(hier_link **a, size_t *cap, size_t need, rp_error
     return RP_OK;
 }
 
-/* Sorts links by receiver (a stable counting sort, so the order within a
- * receiver is the order of creation) and builds link_start. */
-static rp_status links_adopt(hier_state *s, hier_link *links, size_t n, size_t cap, rp_error *err)
+/* Sorts links[0..n) by receiver (a stable counting sort, so the order within
+ * a receiver is the order given) into the state's spare buffer, makes that
+ * the link list and builds link_start.  links stays the caller's. */
+static rp_status links_adopt(hier_state *s, const hier_link *links, size_t n, rp_error *err)
 {
     size_t nn = s->nnodes;
     if (s->cap_start < nn + 1) {
@@ -349,9 +359,10 @@ static rp_status links_adopt(hier_state *s, hier_link *links, size_t n, size_t c
     }
     if (n > UINT32_MAX)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: more than 2^32 links");
-    hier_link *sorted = malloc((cap ? cap : 1) * sizeof *sorted);
-    if (!sorted)
-        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu links", n);
+    rp_status st;
+    if ((st = reserve_links(&s->spare, &s->cap_spare, n ? n : 1, err)) != RP_OK)
+        return st;
+    hier_link *sorted = s->spare;
     uint32_t *start = s->link_start;
     memset(start, 0, (nn + 1) * sizeof *start);
     for (size_t k = 0; k < n; k++)
@@ -364,19 +375,18 @@ static rp_status links_adopt(hier_state *s, hier_link *links, size_t n, size_t c
     for (size_t i = nn; i > 0; i--)
         start[i] = start[i - 1];
     start[0] = 0;
-    free(links);
-    free(s->links);
+    /* The sorted buffer becomes the list, the old list the spare. */
+    hier_link *old = s->links;
+    size_t oldcap = s->cap_links;
     s->links = sorted;
+    s->cap_links = s->cap_spare;
     s->nlinks = n;
-    s->cap_links = cap;
-    size_t full = 0, partial = 0;
-    for (size_t k = 0; k < n; k++) {
-        if (sorted[k].flags & HIER_LINK_PARTIAL)
-            partial++;
-        else
-            full++;
-    }
-    s->links_full = full;
+    s->spare = old;
+    s->cap_spare = oldcap;
+    size_t partial = 0;
+    for (size_t k = 0; k < n; k++)
+        partial += (sorted[k].flags & HIER_LINK_PARTIAL) != 0;
+    s->links_full = n - partial;
     s->links_partial = partial;
     return RP_OK;
 }
@@ -415,8 +425,7 @@ rp_status hier_link_initial(hier_state *s, rp_error *err)
             links[nl++] = buf[k];
         }
     }
-    st = links_adopt(s, links, nl, cap, err);
-    links = NULL;
+    st = links_adopt(s, links, nl, err);
 done:
     free(buf);
     free(code);
@@ -461,157 +470,232 @@ static int near_pair(const hier_state *s, const hier_link *l)
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * q->area;
 }
 
+/* Growable scratch arrays of hier_refine. */
+static int grow(void **a, size_t *cap, size_t need, size_t size)
+{
+    if (need <= *cap)
+        return 1;
+    size_t c = *cap ? *cap : 1024;
+    while (c < need)
+        c *= 2;
+    void *p = realloc(*a, c * size);
+    if (!p)
+        return 0;
+    *a = p;
+    *cap = c;
+    return 1;
+}
+
+/* One refinement pass.  The stored links (sorted by receiver) are judged
+ * once, in parallel; those split are replaced by links to the children,
+ * which are judged in the next round, and so on until a round splits
+ * nothing.  Only the new links are judged and copied in later rounds: the
+ * stored ones stay where they are, marked when they go, so a pass that
+ * splits nothing costs one parallel sweep over the links and leaves them
+ * untouched. */
 rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 {
     *refined = 0;
     rp_status st = RP_OK;
-    hier_link *cur = s->links, *next = NULL;
-    size_t ncur = s->nlinks, capcur = s->cap_links, nnext = 0, capnext = 0;
-    unsigned char *act = NULL, *code = NULL, *mark = NULL;
-    uint32_t *split = NULL;
-    size_t capact = 0, capmark = 0, nfresh = 0;
-    s->links = NULL; /* cur owns them until links_adopt */
-    s->cap_links = 0;
-    for (;;) {
-        if (ncur > capact) {
-            unsigned char *a = realloc(act, ncur);
-            if (!a)
-                goto nomem;
-            act = a;
-            capact = ncur;
+    const size_t nn0 = s->nnodes, nl0 = s->nlinks;
+    hier_link *orig = s->links;
+    const uint32_t *ostart = s->link_start;
+    unsigned char *oact = NULL;   /* per stored link: 0 kept, 1 split, 3 dropped */
+    hier_link *fresh = NULL, *kept = NULL, *splitl = NULL, *cand = NULL;
+    unsigned char *fact = NULL, *kdead = NULL, *mark = NULL, *smode = NULL, *code = NULL;
+    size_t capf = 0, capk = 0, caps = 0, capc = 0, capfa = 0, capkd = 0, capm = 0, capsm = 0, capcode = 0;
+    size_t nfresh = 0, nkept = 0;
+    int changed = 0;
+
+    oact = malloc(nl0 ? nl0 : 1);
+    if (!oact)
+        goto nomem;
+    size_t nsplit = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsplit) if (nl0 > 8192)
+    for (long k = 0; k < (long)nl0; k++) {
+        oact[k] = (unsigned char)decide(s, &orig[k]);
+        nsplit += oact[k] != 0;
+    }
+    for (size_t k = 0; k < nl0; k++)
+        if (!oact[k] && (orig[k].flags & HIER_LINK_INVISIBLE)) {
+            /* An invisible link the oracle would not refine is dropped:
+             * 16 blocked rays between two large elements may miss a
+             * penumbra, so it is dropped only once it is this fine. */
+            oact[k] = 3;
+            s->links_invisible++;
+            changed = 1;
         }
-        if (s->nnodes > capmark) {
-            unsigned char *m = realloc(mark, s->nnodes);
-            if (!m)
-                goto nomem;
-            memset(m + capmark, 0, s->nnodes - capmark);
-            mark = m;
-            capmark = s->nnodes;
-        }
-        /* Links kept by an earlier round keep their decision (their
-         * source's radiosity and form factor did not change); only the
-         * new ones, from nfresh on, are judged. */
-        size_t nsplit = 0;
-        memset(act, 0, nfresh);
-#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsplit) \
-    if (ncur - nfresh > 8192)
-        for (long k = (long)nfresh; k < (long)ncur; k++) {
-            act[k] = (unsigned char)decide(s, &cur[k]);
-            nsplit += act[k] != 0;
-        }
-        if (nsplit == 0)
-            break;
-        /* A receiver that is split takes its near links down with it
-         * (re-evaluated at the children's centres): pushed down
-         * unchanged, the kernel of a near source, which varies across the
-         * receiver, would give the children next to the source too little
-         * and the others too much. */
-        for (size_t k = 0; k < ncur; k++)
-            if (act[k] == 1)
-                mark[cur[k].recv] = 1;
-        for (size_t k = 0; k < ncur; k++)
-            if (act[k] == 0 && mark[cur[k].recv] && near_pair(s, &cur[k])) {
-                act[k] = 1;
-                nsplit++;
-            }
-        for (size_t k = 0; k < ncur; k++)
-            if (act[k] == 1)
-                mark[cur[k].recv] = 0;
-        /* Keep what stays; create the children the splits need, in link
-         * order (node numbers must not depend on threads). */
-        uint32_t *sp = realloc(split, nsplit * 2 * sizeof *sp);
-        if (!sp)
+    /* Round 0 judged the stored links, later rounds the fresh ones. */
+    for (int round = 0;; round++) {
+        size_t capm0 = capm;
+        if (!grow((void **)&mark, &capm, s->nnodes, 1))
             goto nomem;
-        split = sp;
-        if ((st = reserve_links(&next, &capnext, ncur + 3 * nsplit, err)) != RP_OK)
-            goto done;
-        nnext = 0;
+        memset(mark + capm0, 0, capm - capm0);
         size_t ns = 0;
-        for (size_t k = 0; k < ncur; k++) {
-            if (!act[k]) {
-                /* An invisible link the oracle would not refine is dropped:
-                 * 16 blocked rays between two large elements may miss a
-                 * penumbra, so it is dropped only once it is this fine. */
-                if (cur[k].flags & HIER_LINK_INVISIBLE)
+        /* Splits, in a fixed order: node numbers and random keys must not
+         * depend on threads. */
+#define ADD_SPLIT(L, MODE)                                                         \
+    do {                                                                           \
+        if (!grow((void **)&splitl, &caps, ns + 1, sizeof *splitl) ||              \
+            !grow((void **)&smode, &capsm, ns + 1, 1))                             \
+            goto nomem;                                                            \
+        splitl[ns] = (L);                                                          \
+        smode[ns] = (unsigned char)(MODE);                                         \
+        ns++;                                                                      \
+    } while (0)
+        if (round == 0) {
+            if (nsplit == 0)
+                break;
+            /* A receiver that is split takes its near links down with it
+             * (re-evaluated at the children's centres): pushed down
+             * unchanged, the kernel of a near source, which varies across
+             * the receiver, would give the children next to the source
+             * too little and the others too much. */
+            for (size_t k = 0; k < nl0; k++)
+                if (oact[k] == 1)
+                    mark[orig[k].recv] = 1;
+            for (size_t k = 0; k < nl0; k++)
+                if (oact[k] == 0 && mark[orig[k].recv] && near_pair(s, &orig[k]))
+                    oact[k] = 1;
+            for (size_t k = 0; k < nl0; k++)
+                if (oact[k] == 1 || oact[k] == 2) {
+                    mark[orig[k].recv] = 0;
+                    ADD_SPLIT(orig[k], oact[k]);
+                    oact[k] = 1; /* gone from the stored list */
+                }
+        } else {
+            if (nfresh == 0)
+                break;
+            if (!grow((void **)&fact, &capfa, nfresh, 1) || !grow((void **)&kdead, &capkd, nkept + nfresh, 1))
+                goto nomem;
+            size_t nsp = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsp) if (nfresh > 8192)
+            for (long k = 0; k < (long)nfresh; k++) {
+                fact[k] = (unsigned char)decide(s, &fresh[k]);
+                nsp += fact[k] != 0;
+            }
+            if (nsp) {
+                for (size_t k = 0; k < nfresh; k++)
+                    if (fact[k] == 1)
+                        mark[fresh[k].recv] = 1;
+                for (size_t k = 0; k < nfresh; k++)
+                    if (fact[k] == 0 && mark[fresh[k].recv] && near_pair(s, &fresh[k]))
+                        fact[k] = 1;
+            }
+            for (size_t k = 0; k < nfresh; k++)
+                if (fact[k])
+                    ADD_SPLIT(fresh[k], fact[k]);
+            if (nsp) {
+                /* Near links of the split receivers that an earlier round
+                 * kept, then stored ones (found through link_start). */
+                memset(kdead, 0, nkept);
+                for (size_t k = 0; k < nkept; k++)
+                    if (mark[kept[k].recv] == 1 && near_pair(s, &kept[k])) {
+                        kdead[k] = 1;
+                        ADD_SPLIT(kept[k], 1);
+                    }
+                for (size_t k = 0; k < nfresh; k++) {
+                    uint32_t r = fresh[k].recv;
+                    if (fact[k] != 1 || mark[r] != 1)
+                        continue;
+                    mark[r] = 2;
+                    if (r >= nn0)
+                        continue;
+                    for (uint32_t j = ostart[r]; j < ostart[r + 1]; j++)
+                        if (oact[j] == 0 && near_pair(s, &orig[j])) {
+                            oact[j] = 1;
+                            ADD_SPLIT(orig[j], 1);
+                        }
+                }
+                for (size_t k = 0; k < nfresh; k++)
+                    mark[fresh[k].recv] = 0;
+                size_t m = 0;
+                for (size_t k = 0; k < nkept; k++)
+                    if (!kdead[k])
+                        kept[m++] = kept[k];
+                nkept = m;
+            }
+            /* What this round keeps joins the kept list; an invisible link
+             * the oracle would not refine is dropped. */
+            if (!grow((void **)&kept, &capk, nkept + nfresh, sizeof *kept))
+                goto nomem;
+            for (size_t k = 0; k < nfresh; k++) {
+                if (fact[k])
+                    continue;
+                if (fresh[k].flags & HIER_LINK_INVISIBLE)
                     s->links_invisible++;
                 else
-                    next[nnext++] = cur[k];
-                continue;
+                    kept[nkept++] = fresh[k];
             }
-            uint32_t node = act[k] == 1 ? cur[k].recv : cur[k].src;
+            nfresh = 0;
+            if (ns == 0)
+                break;
+        }
+#undef ADD_SPLIT
+        changed = 1;
+        for (size_t t = 0; t < ns; t++) {
+            uint32_t node = smode[t] == 1 ? splitl[t].recv : splitl[t].src;
             if ((st = hier_subdivide(s, node, err)) != RP_OK)
                 goto done;
-            split[2 * ns] = (uint32_t)k;
-            split[2 * ns + 1] = act[k];
-            ns++;
         }
         *refined += ns;
         s->links_refined += ns;
-        size_t kept = nnext;
-        unsigned char *cc = realloc(code, ns * 4);
-        if (!cc)
+        if (!grow((void **)&cand, &capc, ns * 4, sizeof *cand) || !grow((void **)&code, &capcode, ns * 4, 1))
             goto nomem;
-        code = cc;
-        hier_link *cand = next + nnext;
         double rays = 0;
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) \
-    if (ns > 64)
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (ns > 64)
         for (long t = 0; t < (long)ns * 4; t++) {
-            const hier_link *l = &cur[split[2 * (t / 4)]];
+            const hier_link *l = &splitl[t / 4];
             uint32_t c = (uint32_t)(t % 4);
             uint32_t qi = l->recv, pi = l->src;
-            if (split[2 * (t / 4) + 1] == 1)
+            if (smode[t / 4] == 1)
                 qi = s->nodes[qi].child + c;
             else
                 pi = s->nodes[pi].child + c;
             code[t] = (unsigned char)link_eval(s, qi, pi, &cand[t], &rays);
         }
         s->rays += rays;
+        if (!grow((void **)&fresh, &capf, ns * 4, sizeof *fresh))
+            goto nomem;
         for (size_t t = 0; t < ns * 4; t++) {
             if (code[t] == 0)
                 continue;
             s->form_factors++;
-            next[nnext++] = cand[t];
+            fresh[nfresh++] = cand[t];
         }
-        /* Swap: next becomes the current list. */
-        hier_link *tl = cur;
-        cur = next;
-        next = tl;
-        size_t tc = capcur;
-        capcur = capnext;
-        capnext = tc;
-        ncur = nnext;
-        nfresh = kept;
-    }
-    /* What is left of the last round: drop the invisible links it kept. */
-    {
-        size_t m = 0;
-        for (size_t k = 0; k < ncur; k++) {
-            if (cur[k].flags & HIER_LINK_INVISIBLE) {
-                s->links_invisible++;
-                continue;
-            }
-            cur[m++] = cur[k];
-        }
-        ncur = m;
     }
     s->refine_passes++;
-    st = links_adopt(s, cur, ncur, capcur, err);
-    cur = NULL;
+    if (changed) {
+        /* The stored links that stay, then the new ones, sorted by
+         * receiver (stable: old links first, new ones in creation order). */
+        size_t m = 0;
+        for (size_t k = 0; k < nl0; k++)
+            if (oact[k] == 0)
+                orig[m++] = orig[k];
+        if ((st = reserve_links(&s->links, &s->cap_links, m + nkept, err)) != RP_OK)
+            goto done;
+        memcpy(s->links + m, kept, nkept * sizeof *kept);
+        st = links_adopt(s, s->links, m + nkept, err);
+    } else {
+        /* An idle pass (the usual one near convergence): the sort buffer
+         * is not needed until links change again. */
+        free(s->spare);
+        s->spare = NULL;
+        s->cap_spare = 0;
+    }
     goto done;
 nomem:
     st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory refining links");
 done:
-    if (cur) {
-        /* Failed: keep what there is, so the state stays consistent. */
-        s->links = cur;
-        s->cap_links = capcur;
-        s->nlinks = ncur;
-    }
-    free(next);
-    free(act);
-    free(code);
+    free(oact);
+    free(fresh);
+    free(kept);
+    free(splitl);
+    free(cand);
+    free(fact);
+    free(kdead);
     free(mark);
-    free(split);
+    free(smode);
+    free(code);
     return st;
 }

@@ -345,7 +345,7 @@ uint32_t hier_locate(const hier_state *s, uint32_t f, rp_vec3 p, double w[4])
 size_t hier_bytes(const hier_state *s)
 {
     size_t b = s->cap_nodes * (sizeof(hier_node) + (3 * s->nb + 1) * sizeof(double));
-    b += s->cap_links * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
+    b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
     if (s->cull)
         b += s->nfaces * s->nfaces * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t);

@@ -51,4 +51,10 @@ size_t rp_hierarchical_leaves(const void *state, double *area, uint32_t *surface
  * enclosure with every pair visible the exact sum is 1. */
 size_t rp_hierarchical_leaf_form_factor_sums(const void *state, double *sums, size_t cap);
 
+/* 1 if the scene was found to be an enclosure seen from inside (closed,
+ * fronts inward, fixed test rays all landing on fronts): each leaf's
+ * gathered radiosity is then divided by its form-factor sum above, so the
+ * sums are 1 in effect (row-sum normalisation, hierarchical.c). */
+int rp_hierarchical_enclosure(const void *state);
+
 #endif

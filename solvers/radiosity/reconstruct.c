@@ -98,11 +98,7 @@ static inline double recon_u01(uint64_t key, uint64_t d)
     return (double)(recon_mix(key + (d + 1) * UINT64_C(0x9e3779b97f4a7c15)) >> 11) * 0x1.0p-53;
 }
 
-/* Stratified positions of n samples in the unit square: a jittered
- * sqrt(n) x sqrt(n) grid when n is a square, otherwise n-rooks (one sample
- * per row and per column, columns permuted), both unbiased for the box
- * filter.  perm has room for n (used for n-rooks only). */
-static void recon_strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
+void rp_recon_strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
 {
     unsigned m = (unsigned)floor(sqrt((double)n) + 0.5);
     if (m * m == n) {
@@ -141,9 +137,10 @@ typedef struct recon_job {
 } recon_job;
 
 /* Radiance leaving the front of the element hit towards the camera. */
-static void recon_shade(const recon_job *j, const rp_hit *h, uint64_t key, double *xy_gather,
-                        uint32_t *perm, double *L, unsigned long long *rays)
+static void recon_shade(const void *ctx, const rp_hit *h, uint64_t key, double *xy_gather, uint32_t *perm,
+                        double *L, unsigned long long *rays)
 {
+    const recon_job *j = ctx;
     const size_t nb = j->nb;
     uint32_t e = h->element;
     for (size_t b = 0; b < nb; b++)
@@ -174,7 +171,7 @@ static void recon_shade(const recon_job *j, const rp_hit *h, uint64_t key, doubl
         double acc[RECON_MAX_BANDS];
         for (size_t b = 0; b < nb; b++)
             acc[b] = 0;
-        recon_strata(key, G, perm, xy_gather);
+        rp_recon_strata(key, G, perm, xy_gather);
         rp_vec3 t, bt;
         rp_v3_basis(h->n, &t, &bt);
         for (unsigned k = 0; k < G; k++) {
@@ -195,6 +192,83 @@ static void recon_shade(const recon_job *j, const rp_hit *h, uint64_t key, doubl
     }
 }
 
+rp_status rp_recon_camera(const rp_scene *scene, const rp_raycast *rc, unsigned spp, uint64_t seed,
+                          int threads, size_t nb, const rp_recon_shader *shader, float *out,
+                          float *variance, double *rays, rp_error *err)
+{
+    const rp_camera *cam = rp_scene_camera(scene);
+    if (!cam)
+        return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
+    if (nb == 0 || nb > RECON_MAX_BANDS)
+        return rp_error_set(err, RP_ERR_UNSUPPORTED, "%zu bands (at most %d)", nb, RECON_MAX_BANDS);
+    if (spp == 0 || shader->samples == 0)
+        return rp_error_set(err, RP_ERR_INPUT, "no camera or gather rays asked for");
+    rp_camera_frame frame;
+    rp_camera_frame_init(&frame, cam);
+    const uint32_t W = cam->width, H = cam->height;
+    const unsigned G = shader->samples;
+    const unsigned nperm = spp > G ? spp : G;
+    unsigned long long nrays = 0;
+    int failed = 0;
+
+#pragma omp parallel num_threads(threads) reduction(+ : nrays)
+    {
+        double *xy = malloc(2 * (size_t)spp * sizeof *xy);
+        double *xyg = malloc(2 * (size_t)G * sizeof *xyg);
+        uint32_t *perm = malloc((size_t)nperm * sizeof *perm);
+        if (!xy || !xyg || !perm) {
+#pragma omp atomic write
+            failed = 1;
+        }
+        /* Every thread takes part in the loop (a worksharing construct
+         * must be met by all); one without scratch skips its rows. */
+#pragma omp for schedule(dynamic, 1)
+        for (long y = 0; y < (long)H; y++) {
+            if (!xy || !xyg || !perm)
+                continue;
+            double L[RECON_MAX_BANDS], sum[RECON_MAX_BANDS], sq[RECON_MAX_BANDS];
+            for (uint32_t x = 0; x < W; x++) {
+                uint64_t pix = (uint64_t)y * W + x;
+                rp_recon_strata(recon_key(seed, pix, 0), spp, perm, xy);
+                for (size_t b = 0; b < nb; b++)
+                    sum[b] = sq[b] = 0;
+                for (unsigned k = 0; k < spp; k++) {
+                    rp_vec3 d = rp_camera_direction(&frame, x + xy[2 * k], (double)y + xy[2 * k + 1]);
+                    rp_hit h;
+                    nrays++;
+                    if (!rp_ray_closest(rc, frame.eye, d, INFINITY, &h))
+                        continue; /* a miss is black */
+                    shader->shade(shader->ctx, &h, recon_key(seed, pix, (uint64_t)k + 1), xyg, perm, L, &nrays);
+                    for (size_t b = 0; b < nb; b++) {
+                        sum[b] += L[b];
+                        sq[b] += L[b] * L[b];
+                    }
+                }
+                float *o = out + pix * nb;
+                for (size_t b = 0; b < nb; b++)
+                    o[b] = (float)(sum[b] / spp);
+                if (variance) {
+                    /* Sample variance / spp (stratification makes it an
+                     * overestimate); infinite from a single sample. */
+                    float *v = variance + pix * nb;
+                    for (size_t b = 0; b < nb; b++) {
+                        double var = spp > 1 ? (sq[b] - sum[b] * sum[b] / spp) / (spp - 1) / spp : INFINITY;
+                        v[b] = (float)(var > 0 ? var : 0);
+                    }
+                }
+            }
+        }
+        free(xy);
+        free(xyg);
+        free(perm);
+    }
+    if (failed)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory for image scratch");
+    if (rays)
+        *rays += (double)nrays;
+    return RP_OK;
+}
+
 rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_raycast *rc,
                          const rp_recon_params *p, size_t nb, const double *B, float *out,
                          float *variance, double *rays, rp_error *err)
@@ -206,8 +280,6 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
         return rp_error_set(err, RP_ERR_UNSUPPORTED, "%zu bands (at most %d)", nb, RECON_MAX_BANDS);
     if (p->spp == 0 || (p->mode == RP_RECON_GATHER && p->gather_rays == 0))
         return rp_error_set(err, RP_ERR_INPUT, "no camera or gather rays asked for");
-    rp_camera_frame frame;
-    rp_camera_frame_init(&frame, cam);
 
     const size_t n = rp_mesh_nelements(mesh);
     recon_job job = {.scene = scene, .mesh = mesh, .el = rp_mesh_elements(mesh), .rc = rc,
@@ -233,70 +305,9 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
         job.elmat = elmat;
     }
 
-    const uint32_t W = cam->width, H = cam->height;
-    const unsigned spp = p->spp;
-    const unsigned G = p->mode == RP_RECON_GATHER ? p->gather_rays : 1;
-    const unsigned nperm = spp > G ? spp : G;
-    unsigned long long nrays = 0;
-    int failed = 0;
-
-#pragma omp parallel num_threads(p->threads) reduction(+ : nrays)
-    {
-        double *xy = malloc(2 * (size_t)spp * sizeof *xy);
-        double *xyg = malloc(2 * (size_t)G * sizeof *xyg);
-        uint32_t *perm = malloc((size_t)nperm * sizeof *perm);
-        if (!xy || !xyg || !perm) {
-#pragma omp atomic write
-            failed = 1;
-        }
-        /* Every thread takes part in the loop (a worksharing construct
-         * must be met by all); one without scratch skips its rows. */
-#pragma omp for schedule(dynamic, 1)
-        for (long y = 0; y < (long)H; y++) {
-            if (!xy || !xyg || !perm)
-                continue;
-            double L[RECON_MAX_BANDS], sum[RECON_MAX_BANDS], sq[RECON_MAX_BANDS];
-            for (uint32_t x = 0; x < W; x++) {
-                uint64_t pix = (uint64_t)y * W + x;
-                uint64_t pkey = recon_key(p->seed, pix, 0);
-                recon_strata(pkey, spp, perm, xy);
-                for (size_t b = 0; b < nb; b++)
-                    sum[b] = sq[b] = 0;
-                for (unsigned k = 0; k < spp; k++) {
-                    rp_vec3 d = rp_camera_direction(&frame, x + xy[2 * k], (double)y + xy[2 * k + 1]);
-                    rp_hit h;
-                    nrays++;
-                    if (!rp_ray_closest(rc, frame.eye, d, INFINITY, &h))
-                        continue; /* a miss is black */
-                    recon_shade(&job, &h, recon_key(p->seed, pix, (uint64_t)k + 1), xyg, perm, L, &nrays);
-                    for (size_t b = 0; b < nb; b++) {
-                        sum[b] += L[b];
-                        sq[b] += L[b] * L[b];
-                    }
-                }
-                float *o = out + pix * nb;
-                for (size_t b = 0; b < nb; b++)
-                    o[b] = (float)(sum[b] / spp);
-                if (variance) {
-                    /* Sample variance / spp (stratification makes it an
-                     * overestimate); infinite from a single sample. */
-                    float *v = variance + pix * nb;
-                    for (size_t b = 0; b < nb; b++) {
-                        double var = spp > 1 ? (sq[b] - sum[b] * sum[b] / spp) / (spp - 1) / spp : INFINITY;
-                        v[b] = (float)(var > 0 ? var : 0);
-                    }
-                }
-            }
-        }
-        free(xy);
-        free(xyg);
-        free(perm);
-    }
+    rp_recon_shader shader = {recon_shade, &job, p->mode == RP_RECON_GATHER ? p->gather_rays : 1};
+    rp_status st = rp_recon_camera(scene, rc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
     free(VB);
     free(elmat);
-    if (failed)
-        return rp_error_set(err, RP_ERR_NOMEM, "out of memory for image scratch");
-    if (rays)
-        *rays += (double)nrays;
-    return RP_OK;
+    return st;
 }

@@ -56,6 +56,30 @@ void rp_recon_surfaces(const rp_scene *scene, const rp_mesh *mesh, size_t nb, co
  * vertices are shared within a surface only). */
 void rp_recon_vertices(const rp_mesh *mesh, size_t nb, const double *B, double *out);
 
+/* The camera loop shared by the finite-element methods: spp camera rays
+ * per pixel (box filter, stratified jitter keyed by (seed, pixel)), each
+ * hit shaded by the method's own rule.  shade fills L (nb) with the
+ * radiance leaving h towards the camera (0 for backs); key seeds any random
+ * numbers it draws (gather), xy (2 x samples) and perm (samples) are
+ * scratch for rp_recon_strata, and *rays counts the rays it casts. */
+typedef struct rp_recon_shader {
+    void (*shade)(const void *ctx, const rp_hit *h, uint64_t key, double *xy, uint32_t *perm, double *L,
+                  unsigned long long *rays);
+    const void *ctx;
+    unsigned samples; /* 2-D samples the shader draws per hit, >= 1 */
+} rp_recon_shader;
+
+/* Fills out (and variance, may be NULL) as rp_recon_image documents. */
+rp_status rp_recon_camera(const rp_scene *scene, const rp_raycast *rc, unsigned spp, uint64_t seed,
+                          int threads, size_t nb, const rp_recon_shader *shader, float *out,
+                          float *variance, double *rays, rp_error *err);
+
+/* Stratified positions of n samples in the unit square from key: a
+ * jittered sqrt(n) x sqrt(n) grid when n is a square, otherwise n-rooks
+ * (one sample per row and per column, columns permuted); perm has room for
+ * n.  Both are unbiased for the box filter. */
+void rp_recon_strata(uint64_t key, unsigned n, uint32_t *perm, double *xy);
+
 /* The camera image, width x height x nb radiance (row-major from the
  * top-left, band fastest), into out; variance (may be NULL) gets the
  * variance of each pixel mean, estimated from its spp camera samples.  rc

@@ -139,6 +139,7 @@ static const rp_option_spec sj_options[] = {
      "image: element value, vertex-interpolated values, or a one-bounce final gather", "flat"},
     {"spp", "N", "image: camera rays per pixel (stratified, box filter)", "16"},
     {"gather-rays", "N", "image with --reconstruct gather: cosine-distributed rays per camera ray", "16"},
+    RP_RAY_OFFSET_OPTION,
     {NULL, NULL, NULL, NULL}
 };
 
@@ -259,6 +260,8 @@ static rp_status sj_init(void *state, const rp_scene *scene, const rp_options *o
     if (s->n >= RP_NONE)
         return rp_error_set(err, RP_ERR_UNSUPPORTED, "stochastic-jacobi: %zu elements is too many", s->n);
     if ((st = rp_raycast_create(scene, s->mesh, &s->rc, err)) != RP_OK)
+        return st;
+    if ((st = rp_options_ray_offset(o, s->rc, err)) != RP_OK)
         return st;
     s->el = rp_mesh_elements(s->mesh);
     s->verts = rp_mesh_vertices(s->mesh);

@@ -187,6 +187,8 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
         s->max_iterations = 100 * (unsigned long)n;
     if ((st = rp_raycast_create(scene, s->mesh, &s->rc, err)) != RP_OK)
         return st;
+    if ((st = rp_options_ray_offset(o, s->rc, err)) != RP_OK)
+        return st;
     if ((st = rp_ff_context_create(scene, s->mesh, s->rc, &s->ffp, &s->ff, err)) != RP_OK)
         return st;
     s->scratch = calloc((size_t)s->threads, sizeof *s->scratch);

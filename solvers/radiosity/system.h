@@ -112,7 +112,8 @@ typedef struct rp_rad_system {
      NULL},                                                                                  \
     {"hemicube-resolution", "R", "hemicube form factors: pixels along the top face (even)", "256"}, \
     {"ff-tolerance", "EPS", "analytic form factors: relative error goal per element pair",      \
-     RP_RAD_STR(RP_FF_DEFAULT_TOLERANCE)}
+     RP_RAD_STR(RP_FF_DEFAULT_TOLERANCE)},                                                  \
+    RP_RAY_OFFSET_OPTION
 
 #define RP_RAD_RECIPROCITY_OPTION                                                           \
     {"reciprocity", NULL,                                                                    \

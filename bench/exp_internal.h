@@ -1,0 +1,19 @@
+/* Helpers shared by the experiment files of bench/ (experiments.c,
+ * exp_stability.c); not a public interface. */
+#ifndef RP_EXP_INTERNAL_H
+#define RP_EXP_INTERNAL_H
+
+#include "../geometry/status.h"
+#include "experiments.h"
+
+/* Howell's catalog C-11: parallel, directly opposed rectangles a x b at
+ * distance c. */
+double howell_parallel(double a, double b, double c);
+/* C-14: perpendicular rectangles with a common edge of length l, from A1
+ * (width w) to A2 (height h). */
+double howell_perpendicular(double w, double h, double l);
+
+/* radpt experiment stability (exp_stability.c). */
+rp_status rp_exp_stability(const rp_experiment_params *p, rp_error *err);
+
+#endif
