@@ -4,6 +4,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -232,4 +233,29 @@ void rp_json_string(FILE *f, const char *s)
             fputc(*c, f);
     }
     fputc('"', f);
+}
+
+int rp_cli_check_output(const char *command, const char *option, const char *path)
+{
+    if (!path)
+        return 0;
+    char dir[4096];
+    const char *slash = strrchr(path, '/');
+    if (!slash)
+        snprintf(dir, sizeof dir, ".");
+    else if (slash == path)
+        snprintf(dir, sizeof dir, "/");
+    else
+        snprintf(dir, sizeof dir, "%.*s", (int)(slash - path), path);
+    struct stat st;
+    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode)) {
+        fprintf(stderr, "radpt %s: %s %s: directory '%s' does not exist (create it first)\n", command, option,
+                path, dir);
+        return 2;
+    }
+    if (access(dir, W_OK) != 0) {
+        fprintf(stderr, "radpt %s: %s %s: directory '%s' is not writable\n", command, option, path, dir);
+        return 2;
+    }
+    return 0;
 }

@@ -41,6 +41,11 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
 /* An extra option's value or NULL. */
 const char *rp_cli_extra(const rp_cli *cli, const char *name);
 
+/* 0 when the directory a file is to be written into (path's parent) exists
+ * and is writable; otherwise prints "radpt COMMAND: OPTION PATH: ..." and
+ * returns 2, so a long run is refused before it starts, not after. */
+int rp_cli_check_output(const char *command, const char *option, const char *path);
+
 /* Prints "radpt: message" for an error and returns its exit code. */
 int rp_cli_fail(rp_status st, const rp_error *err);
 

@@ -2,6 +2,7 @@
  *
  *   radpt reference SCENE [--spp N] [--samples N] [--seed S] [--cache DIR]
  *                   [--threads T] [--force] [--json]
+ *                   [--checkpoint FILE [--checkpoint-every SECONDS]] [--resume FILE]
  *   radpt bench SCENE [--methods LIST] [--budget SECONDS] -o DIR [--seeds N]
  *               [--checkpoints N] [--target RMSE] [--surfaces] [--cache DIR]
  *               [--reference-spp N] [--reference-samples N] [--seed S] [--threads T]
@@ -12,6 +13,7 @@
 #include <errno.h>
 #include <inttypes.h>
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -128,9 +130,19 @@ static void command_line(int argc, char **argv, char *buf, size_t n)
 
 /* ------------------------------------------------------------ reference */
 
+/* radpt reference --checkpoint: SIGINT / SIGTERM stop the render at the
+ * next step with its state saved. */
+static volatile sig_atomic_t reference_stop;
+
+static void on_reference_signal(int sig)
+{
+    (void)sig;
+    reference_stop = 1;
+}
+
 int rp_cmd_reference(int argc, char **argv)
 {
-    static const char *const extra[] = {"spp", "samples", "cache", NULL};
+    static const char *const extra[] = {"spp", "samples", "cache", "checkpoint", "checkpoint-every", "resume", NULL};
     static const char *const flags[] = {"--force", NULL};
     int found[1] = {0};
     char **av = calloc((size_t)argc + 1, sizeof *av);
@@ -144,15 +156,34 @@ int rp_cmd_reference(int argc, char **argv)
         rc = parse_ulong(&cli, "spp", 1, 1ul << 30, &spp);
     if (!rc)
         rc = parse_ulong(&cli, "samples", 1, 1ul << 40, &samples);
+    double every = 60;
+    if (!rc)
+        rc = parse_positive(&cli, "checkpoint-every", &every);
+    if (!rc && rp_cli_extra(&cli, "checkpoint-every") && !rp_cli_extra(&cli, "checkpoint")) {
+        fprintf(stderr, "radpt reference: --checkpoint-every needs --checkpoint FILE (see radpt help)\n");
+        rc = 2;
+    }
+    if (!rc)
+        rc = rp_cli_check_output("reference", "--checkpoint", rp_cli_extra(&cli, "checkpoint"));
     if (rc) {
         free(av);
         return rc;
+    }
+    if (rp_cli_extra(&cli, "checkpoint")) {
+        struct sigaction sa;
+        memset(&sa, 0, sizeof sa);
+        sa.sa_handler = on_reference_signal;
+        sigemptyset(&sa.sa_mask);
+        sigaction(SIGINT, &sa, NULL);
+        sigaction(SIGTERM, &sa, NULL);
     }
     front fr = {0};
     rp_reference_params rp = {.size = sizeof rp, .spp = spp, .samples = samples,
                               .seed = seed_given(ac, av) ? cli.seed : 0, .threads = cli.threads,
                               .cache_dir = rp_cli_extra(&cli, "cache"), .force = found[0],
-                              .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr};
+                              .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr,
+                              .checkpoint = rp_cli_extra(&cli, "checkpoint"), .checkpoint_every = every,
+                              .resume = rp_cli_extra(&cli, "resume"), .stop = &reference_stop};
     rp_error err;
     rp_scene *scene = NULL;
     rp_reference *ref = NULL;

@@ -14,6 +14,7 @@
 #include "cli.h"
 #include "commands.h"
 #include "image.h"
+#include "resume.h"
 #include "spectrum.h"
 
 /* SIGINT / SIGTERM stop a run at the next step boundary: the image reached
@@ -43,14 +44,47 @@ typedef struct run_totals {
     size_t steps;
 } run_totals;
 
+/* render --checkpoint / --resume (resume.h). */
+typedef struct run_ckpt {
+    const char *path;       /* --checkpoint FILE, NULL: none */
+    double every;           /* --checkpoint-every, seconds of the run */
+    rp_resume_info info;    /* the run's identity; totals filled when written */
+    int converged;          /* the resumed state already meets the method's rule */
+    size_t written;
+} run_ckpt;
+
+/* Writes the checkpoint; the time it takes is not solver time (returned
+ * in *spent). */
+static rp_status write_ckpt(run_ckpt *ck, const rp_solver *solver, const run_totals *tot, double *spent,
+                            rp_error *err)
+{
+    double t = rp_clock();
+    ck->info.steps = (double)tot->steps;
+    ck->info.iterations = tot->sum.iterations;
+    ck->info.rays = tot->sum.rays;
+    ck->info.paths = tot->sum.paths;
+    ck->info.form_factors = tot->sum.form_factors;
+    ck->info.seconds = tot->seconds;
+    rp_status st = rp_resume_save(ck->path, &ck->info, solver, err);
+    ck->written += st == RP_OK;
+    *spent += rp_clock() - t;
+    return st;
+}
+
+/* tot comes in zeroed, or with a resumed run's totals, which it carries on
+ * (seconds included; --time counts this run's seconds only). */
 static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *label,
-                            run_totals *tot, rp_error *err)
+                            run_totals *tot, run_ckpt *ck, rp_error *err)
 {
     rp_progress bar;
     rp_progress_begin(&bar, label);
     catch_signals();
-    memset(tot, 0, sizeof *tot);
-    double t0 = rp_clock();
+    const double seconds0 = tot->seconds;
+    double t0 = rp_clock(), excluded = 0, last_ckpt = t0;
+    if (ck && ck->converged) {
+        rp_progress_end(&bar);
+        return ck->path ? write_ckpt(ck, solver, tot, &excluded, err) : RP_OK;
+    }
     for (;;) {
         rp_step_info info;
         rp_status st = rp_solver_step(solver, &info, err);
@@ -64,18 +98,28 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
         tot->sum.form_factors += info.form_factors;
         tot->sum.iterations += info.iterations;
         tot->last = info;
-        tot->seconds = rp_clock() - t0;
+        double now = rp_clock(), run_s = now - t0 - excluded;
+        tot->seconds = seconds0 + run_s;
         double frac = info.progress;
-        if (cli->time_budget > 0 && tot->seconds / cli->time_budget > frac)
-            frac = tot->seconds / cli->time_budget;
+        if (cli->time_budget > 0 && run_s / cli->time_budget > frac)
+            frac = run_s / cli->time_budget;
         char detail[96];
         snprintf(detail, sizeof detail, "%.0f iterations, %.1f s", tot->sum.iterations, tot->seconds);
         rp_progress_update(&bar, frac, detail);
-        if (info.converged || (cli->time_budget > 0 && tot->seconds >= cli->time_budget) || interrupted)
+        if (info.converged || (cli->time_budget > 0 && run_s >= cli->time_budget) || interrupted)
             break;
+        if (ck && ck->path && now - last_ckpt >= ck->every) {
+            rp_status st = write_ckpt(ck, solver, tot, &excluded, err);
+            if (st != RP_OK) {
+                rp_progress_end(&bar);
+                return st;
+            }
+            last_ckpt = rp_clock();
+        }
     }
     rp_progress_end(&bar);
-    return RP_OK;
+    /* the last state, whether converged, out of time or interrupted */
+    return ck && ck->path ? write_ckpt(ck, solver, tot, &excluded, err) : RP_OK;
 }
 
 static void fill_options(rp_options *o, const rp_cli *cli, unsigned want)
@@ -168,12 +212,38 @@ static rp_status planes_make(const rp_scene *scene, const float *radiance, size_
 
 int rp_cmd_render(int argc, char **argv)
 {
+    static const char *const extra[] = {"checkpoint", "checkpoint-every", "resume", NULL};
     rp_cli cli = {.command = "render"};
-    int rc = rp_cli_parse(&cli, argc, argv, NULL, 1);
+    int rc = rp_cli_parse(&cli, argc, argv, extra, 1);
     if (rc)
         return rc;
     if (!cli.out) {
         fprintf(stderr, "radpt render: needs -o OUT.exr (see radpt help)\n");
+        return 2;
+    }
+    const char *ckpt_path = rp_cli_extra(&cli, "checkpoint"), *resume_path = rp_cli_extra(&cli, "resume");
+    const char *every_text = rp_cli_extra(&cli, "checkpoint-every");
+    double every = 60;
+    if (every_text) {
+        char *end;
+        every = strtod(every_text, &end);
+        if (end == every_text || *end || !isfinite(every) || every < 0) {
+            fprintf(stderr, "radpt render: --checkpoint-every: '%s' is not a number of seconds >= 0 "
+                            "(see radpt help)\n", every_text);
+            return 2;
+        }
+        if (!ckpt_path) {
+            fprintf(stderr, "radpt render: --checkpoint-every needs --checkpoint FILE (see radpt help)\n");
+            return 2;
+        }
+    }
+    if ((rc = rp_cli_check_output("render", "-o", cli.out)) != 0 ||
+        (rc = rp_cli_check_output("render", "--png", cli.png)) != 0 ||
+        (rc = rp_cli_check_output("render", "--checkpoint", ckpt_path)) != 0)
+        return rc;
+    if ((ckpt_path || resume_path) && !rp_solver_can_checkpoint(rp_solver_lookup(cli.method))) {
+        fprintf(stderr, "radpt render: method %s cannot be checkpointed or resumed (only pathtrace can)\n",
+                cli.method);
         return 2;
     }
     rp_error err;
@@ -195,7 +265,37 @@ int rp_cmd_render(int argc, char **argv)
     if (st != RP_OK)
         goto done;
     run_totals tot;
-    st = run_solver(solver, &cli, "render", &tot, &err);
+    memset(&tot, 0, sizeof tot);
+    run_ckpt ck;
+    memset(&ck, 0, sizeof ck);
+    if (ckpt_path || resume_path) {
+        ck.path = ckpt_path;
+        ck.every = every;
+        rp_scene_hash(scene, ck.info.scene_hash);
+        snprintf(ck.info.method, sizeof ck.info.method, "%s", cli.method);
+        ck.info.seed = cli.seed;
+        ck.info.width = cam->width;
+        ck.info.height = cam->height;
+        ck.info.nbands = rp_scene_nbands(scene);
+        snprintf(ck.info.scene, sizeof ck.info.scene, "%s", cli.scene);
+        options_text(&cli, ck.info.options, sizeof ck.info.options);
+    }
+    if (resume_path) {
+        rp_resume_info got;
+        rp_step_info last;
+        st = rp_resume_load(resume_path, &ck.info, &got, solver, &last, &err);
+        if (st != RP_OK)
+            goto done;
+        tot.steps = (size_t)got.steps;
+        tot.sum.iterations = got.iterations;
+        tot.sum.rays = got.rays;
+        tot.sum.paths = got.paths;
+        tot.sum.form_factors = got.form_factors;
+        tot.seconds = got.seconds;
+        tot.last = last;
+        ck.converged = last.converged;
+    }
+    st = run_solver(solver, &cli, "render", &tot, ckpt_path || resume_path ? &ck : NULL, &err);
     if (st != RP_OK)
         goto done;
 
@@ -263,6 +363,8 @@ int rp_cmd_render(int argc, char **argv)
     printf("\n");
     if (cli.png)
         printf("wrote %s\n", cli.png);
+    if (ck.written)
+        printf("wrote checkpoint %s (%.17g iterations)\n", ck.path, tot.sum.iterations);
     if (interrupted)
         st = rp_error_set(&err, RP_ERR_RUNTIME, "interrupted after %.17g samples; wrote what was reached",
                           est.samples);
@@ -297,7 +399,8 @@ int rp_cmd_probe(int argc, char **argv)
     if (st != RP_OK)
         goto done;
     run_totals tot;
-    st = run_solver(solver, &cli, "probe", &tot, &err);
+    memset(&tot, 0, sizeof tot);
+    st = run_solver(solver, &cli, "probe", &tot, NULL, &err);
     if (st != RP_OK)
         goto done;
     size_t nb = rp_scene_nbands(scene), ns = rp_scene_nsurfaces(scene);

@@ -15,6 +15,7 @@
 #include "image.h"
 #include "metrics.h"
 #include "plot.h"
+#include "resume.h"
 
 /* Sub-pixel rays per side for the pixel mask. */
 #define MASK_SUB 4
@@ -337,8 +338,12 @@ static rp_status make_exact(const rp_scene *scene, const double *L, rp_reference
     return st;
 }
 
-static rp_status make_pathtraced(const rp_scene *scene, const rp_reference_params *p, rp_reference *r,
-                                 rp_error *err)
+/* A field of rp_reference_params that the caller's struct has (it can grow). */
+#define PARAM(p, field, fallback)                                                                   \
+    ((p) && (p)->size >= offsetof(rp_reference_params, field) + sizeof(p)->field ? (p)->field : (fallback))
+
+static rp_status make_pathtraced(const rp_scene *scene, const char *scene_name, const rp_reference_params *p,
+                                 rp_reference *r, rp_error *err)
 {
     unsigned long spp, samples, batch;
     uint64_t seed;
@@ -361,11 +366,47 @@ static rp_status make_pathtraced(const rp_scene *scene, const rp_reference_param
     rp_status st = rp_solver_create(rp_solver_lookup("pathtrace"), scene, &o, &solver, err);
     if (st != RP_OK)
         return st;
-    double t0 = rp_clock(), last = -1;
-    for (;;) {
+
+    /* Checkpoint and resume (resume.h): the state is identified by the
+     * scene hash, seed and image, and by the key as the options text. */
+    const char *ckpt = PARAM(p, checkpoint, NULL), *resume = PARAM(p, resume, NULL);
+    double every = PARAM(p, checkpoint_every, 60.0);
+    volatile sig_atomic_t *stop = PARAM(p, stop, NULL);
+    rp_resume_info id;
+    memset(&id, 0, sizeof id);
+    snprintf(id.scene_hash, sizeof id.scene_hash, "%s", r->scene_hash);
+    snprintf(id.method, sizeof id.method, "pathtrace");
+    id.seed = seed;
+    id.width = r->radiance ? r->width : 0;
+    id.height = r->radiance ? r->height : 0;
+    id.nbands = r->nbands;
+    snprintf(id.scene, sizeof id.scene, "%s", scene_name);
+    snprintf(id.options, sizeof id.options, "%s", r->key);
+    double prior = 0;
+    int done = 0, interrupted = 0;
+    if (resume) {
+        rp_resume_info got;
+        rp_step_info last_info;
+        if ((st = rp_resume_load(resume, &id, &got, solver, &last_info, err)) != RP_OK) {
+            rp_solver_destroy(solver);
+            return st;
+        }
+        prior = got.seconds;
+        id.steps = got.steps;
+        id.iterations = got.iterations;
+        id.rays = got.rays;
+        id.paths = got.paths;
+        done = last_info.converged;
+    }
+    double t0 = rp_clock(), last = -1, last_ckpt = t0, excluded = 0;
+    while (!done) {
         rp_step_info info;
         if ((st = rp_solver_step(solver, &info, err)) != RP_OK)
             break;
+        id.steps += 1;
+        id.iterations += info.iterations;
+        id.rays += info.rays;
+        id.paths += info.paths;
         double now = rp_clock();
         if (p && p->progress && (now - last > 0.2 || info.converged)) {
             char detail[96];
@@ -376,8 +417,27 @@ static rp_status make_pathtraced(const rp_scene *scene, const rp_reference_param
         }
         if (info.converged)
             break;
+        if (stop && *stop) {
+            interrupted = 1;
+            break;
+        }
+        if (ckpt && now - last_ckpt >= every) {
+            id.seconds = prior + (now - t0 - excluded);
+            if ((st = rp_resume_save(ckpt, &id, solver, err)) != RP_OK)
+                break;
+            last_ckpt = rp_clock();
+            excluded += last_ckpt - now;
+        }
     }
-    r->seconds = rp_clock() - t0;
+    r->seconds = prior + (rp_clock() - t0 - excluded);
+    if (st == RP_OK && ckpt) {
+        id.seconds = r->seconds;
+        st = rp_resume_save(ckpt, &id, solver, err);
+    }
+    if (st == RP_OK && interrupted)
+        st = ckpt ? rp_error_set(err, RP_ERR_RUNTIME, "interrupted; the reference render's state is in %s "
+                                 "(continue it with --resume %s)", ckpt, ckpt)
+                  : rp_error_set(err, RP_ERR_RUNTIME, "interrupted");
     size_t npix = (size_t)r->width * r->height;
     if (st == RP_OK && r->radiance && !(r->variance = malloc(npix * r->nbands * sizeof(float))))
         st = rp_error_set(err, RP_ERR_NOMEM, "out of memory for the reference");
@@ -676,7 +736,7 @@ rp_status rp_reference_get(const rp_scene *scene, const char *scene_name,
         }
         params->log(params->log_ctx, msg);
     }
-    st = exact ? make_exact(scene, L, r, err) : make_pathtraced(scene, params, r, err);
+    st = exact ? make_exact(scene, L, r, err) : make_pathtraced(scene, scene_name, params, r, err);
     if (st == RP_OK) {
         finish_stats(r);
         st = rp_mkdirs(dir, err);

@@ -26,6 +26,7 @@
 #ifndef RP_REFERENCE_H
 #define RP_REFERENCE_H
 
+#include <signal.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -53,6 +54,16 @@ typedef struct rp_reference_params {
     void *log_ctx;
     rp_progress_fn progress;   /* may be NULL */
     void *progress_ctx;
+    /* Checkpointing a long path-traced reference (resume.h; not used for an
+     * exact or a cached one).  checkpoint: a file the render's state is
+     * written to every checkpoint_every seconds (0: after every step), at
+     * the end, and when *stop turns non-zero, which ends the render with
+     * RP_ERR_RUNTIME.  resume: a checkpoint of the same scene and key to
+     * continue from.  Each may be NULL. */
+    const char *checkpoint;
+    double checkpoint_every;
+    const char *resume;
+    volatile sig_atomic_t *stop;
 } rp_reference_params;
 
 /* The reference seed: far from the seeds benchmarks use (1, 2, 3, ...). */

@@ -178,7 +178,9 @@ Test(cli, render_writes_exr_with_metadata_and_fails_cleanly)
 
     r = rp_run_radpt("render scenes/furnace.scene --method pathtrace --spp 1 "
                      "-o /tmp/rp-no-such-dir/out.exr");
-    cr_expect_eq(r.status, 1, "stderr: %s", r.err);
+    /* refused before rendering: a usage error, not a failure at the end */
+    cr_expect_eq(r.status, 2, "stderr: %s", r.err);
+    cr_expect(strstr(r.err, "does not exist") != NULL, "stderr: %s", r.err);
     cr_expect(access("/tmp/rp-no-such-dir", F_OK) != 0);
     rp_run_free(&r);
 }
