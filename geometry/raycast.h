@@ -56,6 +56,12 @@ int rp_ray_closest_from(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, r
  * is blocked by any face; both ends are offset off their surfaces. */
 int rp_ray_occluded(const rp_raycast *rc, rp_vec3 a, rp_vec3 na, rp_vec3 b, rp_vec3 nb);
 
+/* Closest hits of n rays from one origin o (camera rays through
+ * neighbouring pixels), traced as a coherent stream; otherwise as
+ * rp_ray_closest_n with tmax infinite. */
+void rp_ray_closest_coherent(const rp_raycast *rc, size_t n, rp_vec3 o, const rp_vec3 *d, rp_hit *hits,
+                             unsigned char *hit_mask);
+
 /* Packets of independent rays (rtcIntersect1M / rtcOccluded1M) for
  * throughput.  hit_mask[i] is 1 on a hit. */
 void rp_ray_closest_n(const rp_raycast *rc, size_t n, const rp_vec3 *o, const rp_vec3 *d,

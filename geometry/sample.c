@@ -25,6 +25,7 @@ typedef struct rp_face_map rp_face_map;
 
 struct rp_area_sampler {
     const rp_scene *scene;
+    const rp_face *scene_faces;
     size_t count;              /* faces with non-zero weight */
     uint32_t *faces;           /* [count]: alias-table index -> scene face */
     double *pdf;               /* [nfaces of the scene]: pdf_area per face */
@@ -139,6 +140,7 @@ rp_status rp_area_sampler_create(const rp_scene *scene, uint32_t surface, rp_are
     double *w = malloc((nfaces ? nfaces : 1) * sizeof *w);
     if (s) {
         s->scene = scene;
+        s->scene_faces = faces;
         s->pdf = calloc(nfaces ? nfaces : 1, sizeof *s->pdf);
         s->faces = malloc((nfaces ? nfaces : 1) * sizeof *s->faces);
         s->map = malloc((nfaces ? nfaces : 1) * sizeof *s->map);
@@ -216,9 +218,9 @@ void rp_area_sampler_sample(const rp_area_sampler *s, double u0, double u1, doub
     }
     if (!(u0 >= 0))
         u0 = 0;
-    size_t k = rp_alias_lookup(s->table, u0);
+    size_t k = s->count == 1 ? 0 : rp_alias_lookup(s->table, u0);
     uint32_t f = s->faces[k];
-    const rp_face *fc = &rp_scene_faces(s->scene)[f];
+    const rp_face *fc = &s->scene_faces[f];
     out->p = face_map_point(s->scene, &s->map[k], u1, u2);
     out->n = fc->normal;
     out->face = f;

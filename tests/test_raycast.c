@@ -322,6 +322,44 @@ Test(raycast, stream_matches_single_rays)
     gsl_rng_free(r);
 }
 
+/* Camera-like rays from one eye through a grid, traced as a coherent
+ * stream: the same faces and distances as one by one. */
+Test(raycast, coherent_stream_matches_single_rays)
+{
+    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
+    gsl_rng_set(r, 778);
+    rp_scene *s = random_scene(r, 100, 100);
+    rp_raycast *rc = make_rc(s, NULL);
+    enum { N = 37 * 23 }; /* rows of 37: not a multiple of the stream length */
+    rp_vec3 eye = rp_v3(0.1, -0.2, -3.0);
+    rp_vec3 *d = malloc(N * sizeof *d);
+    rp_hit *hits = malloc(N * sizeof *hits);
+    unsigned char *mask = malloc(N);
+    for (int i = 0; i < N; i++)
+        d[i] = rp_v3(-0.6 + 1.2 * (i % 37) / 36.0 + 0.01 * gsl_rng_uniform(r),
+                     -0.6 + 1.2 * (i / 37) / 22.0 + 0.01 * gsl_rng_uniform(r), 1.0);
+    rp_ray_closest_coherent(rc, N, eye, d, hits, mask);
+    int nhit = 0;
+    for (int i = 0; i < N; i++) {
+        rp_hit h;
+        int got = rp_ray_closest(rc, eye, d[i], INFINITY, &h);
+        cr_assert_eq(mask[i], got, "ray %d", i);
+        if (got) {
+            nhit++;
+            cr_assert_eq(hits[i].face, h.face, "ray %d", i);
+            cr_assert_eq(hits[i].front, h.front, "ray %d", i);
+            cr_assert_float_eq(hits[i].t, h.t, 1e-12 * (1 + h.t), "ray %d", i);
+        }
+    }
+    cr_assert_gt(nhit, N / 10);
+    free(d);
+    free(hits);
+    free(mask);
+    rp_raycast_destroy(rc);
+    rp_scene_destroy(s);
+    gsl_rng_free(r);
+}
+
 /* ---- front / back ----------------------------------------------------- */
 
 Test(raycast, front_and_back)

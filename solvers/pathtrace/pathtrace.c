@@ -445,23 +445,30 @@ static void pt_image_pass(pt_state *s, rp_step_info *info)
         double L[PT_MAX_BANDS];
         uint32_t x0 = (uint32_t)(tile % tx) * PT_TILE, y0 = (uint32_t)(tile / tx) * PT_TILE;
         uint32_t x1 = x0 + PT_TILE < W ? x0 + PT_TILE : W, y1 = y0 + PT_TILE < H ? y0 + PT_TILE : H;
-        for (uint32_t y = y0; y < y1; y++)
-            for (uint32_t x = x0; x < x1; x++) {
-                size_t pix = (size_t)y * W + x;
-                rp_sample_point sp;
-                rp_sampler_start(&s->image_sampler, pix, index, &sp);
+        rp_sample_point sp[PT_TILE];
+        rp_vec3 d[PT_TILE];
+        rp_hit hit[PT_TILE];
+        unsigned char found[PT_TILE];
+        for (uint32_t y = y0; y < y1; y++) {
+            /* The row's camera rays first, as one coherent stream. */
+            const uint32_t n = x1 - x0;
+            for (uint32_t i = 0; i < n; i++) {
+                uint32_t x = x0 + i;
+                rp_sampler_start(&s->image_sampler, (size_t)y * W + x, index, &sp[i]);
                 /* Box filter: a uniform point in the pixel; the vertical
                  * field of view spans the image height, (0, 0) is the
                  * top-left corner. */
-                double jx = rp_sampler_get(&sp, DIM_PIXEL), jy = rp_sampler_get(&sp, DIM_PIXEL + 1);
+                double jx = rp_sampler_get(&sp[i], DIM_PIXEL), jy = rp_sampler_get(&sp[i], DIM_PIXEL + 1);
                 double sx = (2.0 * (x + jx) / W - 1.0) * s->tan_half * s->aspect;
                 double sy = (1.0 - 2.0 * (y + jy) / H) * s->tan_half;
-                rp_vec3 d = rp_v3_normalize(
-                    rp_v3_madd(rp_v3_madd(s->forward, s->right, sx), s->up, sy));
-                rp_hit hit;
-                rays++;
-                if (rp_ray_closest(s->rc, s->eye, d, INFINITY, &hit))
-                    pt_path(s, &sp, &hit, d, L, &rays);
+                d[i] = rp_v3_normalize(rp_v3_madd(rp_v3_madd(s->forward, s->right, sx), s->up, sy));
+            }
+            rp_ray_closest_coherent(s->rc, n, s->eye, d, hit, found);
+            rays += n;
+            for (uint32_t i = 0; i < n; i++) {
+                size_t pix = (size_t)y * W + x0 + i;
+                if (found[i])
+                    pt_path(s, &sp[i], &hit[i], d[i], L, &rays);
                 else
                     for (size_t b = 0; b < nb; b++)
                         L[b] = 0; /* nothing out there */
@@ -474,6 +481,7 @@ static void pt_image_pass(pt_state *s, rp_step_info *info)
                     sq[b] += x * x;
                 }
             }
+        }
     }
     s->passes++;
     info->rays += (double)rays;
