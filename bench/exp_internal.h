@@ -13,6 +13,13 @@ double howell_parallel(double a, double b, double c);
  * (width w) to A2 (height h). */
 double howell_perpendicular(double w, double h, double l);
 
+/* A message through p->log (if set), printf-style. */
+void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+
 /* radpt experiment stability (exp_stability.c). */
 rp_status rp_exp_stability(const rp_experiment_params *p, rp_error *err);
 

@@ -17,7 +17,6 @@
  *   6 thin and coincident geometry: acne and leaks against --ray-offset;
  *   7 non-physical input: refused, with the messages and exit status. */
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -45,24 +44,6 @@ typedef struct stab {
     char first_bad[160];
     char gp_note[256];
 } stab;
-
-static void slog(const stab *S, const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 2, 3)))
-#endif
-    ;
-
-static void slog(const stab *S, const char *fmt, ...)
-{
-    if (!S->p->log)
-        return;
-    char msg[1024];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
-    va_end(ap);
-    S->p->log(S->p->log_ctx, msg);
-}
 
 /* Prints v with fmt; a non-finite v is written as NONFINITE and counted
  * (the experiment then fails). */
@@ -117,7 +98,7 @@ static rp_status stab_plot(stab *S, const char *name, const char *body, rp_error
     rp_error gerr;
     if (rp_gnuplot_run(S->p->out_dir, file, &gerr) != RP_OK && !S->gp_note[0]) {
         snprintf(S->gp_note, sizeof S->gp_note, "charts not drawn: %.200s", gerr.message);
-        slog(S, "%s", S->gp_note);
+        rp_exp_log(S->p, "%s", S->gp_note);
     }
     return RP_OK;
 }
@@ -239,7 +220,7 @@ static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const so
         st = rp_solver_estimate(s, &e, err);
     }
     rp_solver_destroy(s);
-    slog(S, "  %s: %.2f s solver time, %.0f steps", spec, r->seconds, r->steps);
+    rp_exp_log(S->p, "  %s: %.2f s solver time, %.0f steps", spec, r->seconds, r->steps);
     if (st != RP_OK) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", err ? err->message : "");
@@ -398,7 +379,7 @@ static rp_status sec_reflectance(stab *S, rp_error *err)
             rp_mesh_destroy(mesh);
         }
         for (size_t k = 0; k < nm && st == RP_OK; k++) {
-            slog(S, "stability/reflectance rho %g: %s", rho, M[k].label);
+            rp_exp_log(S->p, "stability/reflectance rho %g: %s", rho, M[k].label);
             /* one thread: 24 elements do not pay for a parallel region
              * per sweep on a shared machine */
             sopt so = {.want = RP_WANT_SURFACES, .budget = budget, .exact = M[k].track ? L : 0, .tol = tol,
@@ -433,7 +414,7 @@ static rp_status sec_reflectance(stab *S, rp_error *err)
                     mean += run.surf[i] / (double)run.ns;
                 w->error = (mean - L) / L;
             }
-            slog(S, "  %.3g s, %.0f iterations, error %.3g", run.seconds, run.iterations, w->error);
+            rp_exp_log(S->p, "  %.3g s, %.0f iterations, error %.3g", run.seconds, run.iterations, w->error);
             srun_free(&run);
         }
         rp_scene_destroy(sc);
@@ -685,7 +666,7 @@ static rp_status sec_small_light(stab *S, rp_error *err)
             break;
         lrow *w = &lr[k];
         w->s = s;
-        slog(S, "stability/small light %g: pathtrace", s);
+        rp_exp_log(S->p, "stability/small light %g: pathtrace", s);
         char spec[256];
         snprintf(spec, sizeof spec, "pathtrace:samples=%lu:batch=%lu:spp=%u", samples, samples, spp);
         sopt so = {.want = RP_WANT_SURFACES | RP_WANT_IMAGE, .budget = 1e9};
@@ -742,7 +723,7 @@ static rp_status sec_small_light(stab *S, rp_error *err)
                                        : "stochastic-jacobi:elements=150:rays=100000"};
         double *dst[4] = {&w->gs_an, &w->gs_hc, &w->gs_mc, &w->sj};
         for (int m = 0; m < 4 && st == RP_OK; m++) {
-            slog(S, "stability/small light %g: %s", s, rad[m]);
+            rp_exp_log(S->p, "stability/small light %g: %s", s, rad[m]);
             sopt sr = {.want = RP_WANT_SURFACES, .budget = 30};
             srun r;
             if ((st = srun_do(S, sc, rad[m], &sr, &r, err)) == RP_OK)
@@ -974,7 +955,7 @@ static rp_status sec_corner(stab *S, rp_error *err)
                 rp_scene_destroy(sc);
                 break;
             }
-            slog(S, "stability/corner: %s %g", cfg == 0 ? "perpendicular gap" : "parallel", d);
+            rp_exp_log(S->p, "stability/corner: %s %g", cfg == 0 ? "perpendicular gap" : "parallel", d);
             fprintf(f, "| %s %g | ", cfg == 0 ? "perpendicular, gap" : "parallel, distance", d);
             put(S, f, "%.8f |", exact, "corner exact");
             if (sl < sizeof secs_line)
@@ -1238,7 +1219,7 @@ static rp_status sec_block(stab *S, rp_error *err)
         st = rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     float *refimg = NULL;
     for (size_t k = 0; k < nr && st == RP_OK; k++) {
-        slog(S, "stability/block: %s", runs[k].label);
+        rp_exp_log(S->p, "stability/block: %s", runs[k].label);
         sopt so = {.want = RP_WANT_IMAGE, .budget = 60};
         srun r;
         if ((st = srun_do(S, sc[runs[k].scene], runs[k].spec, &so, &r, err)) != RP_OK)
@@ -1390,7 +1371,7 @@ static rp_status sec_shadow(stab *S, rp_error *err)
     snprintf(spec, sizeof spec, "pathtrace:spp=%lu", ref_spp);
     sopt so = {.want = RP_WANT_IMAGE, .budget = 120};
     srun r;
-    slog(S, "stability/shadow: reference");
+    rp_exp_log(S->p, "stability/shadow: reference");
     if ((st = srun_do(S, sc, spec, &so, &r, err)) == RP_OK) {
         top_profile(r.img, W, W, 0.4, 0.6, ref);
         st = stab_png(S, "shadow_reference.png", r.img, W, W, 2 * strip_mean(ref, W, 0.7, 0.9), err);
@@ -1410,7 +1391,7 @@ static rp_status sec_shadow(stab *S, rp_error *err)
     for (int g = 0; g < 2 && st == RP_OK; g++)
         for (size_t k = 0; k < nh && st == RP_OK; k++) {
             snprintf(spec, sizeof spec, "gauss-seidel:max-edge=%g%s", hs[k], g ? ":reconstruct=gouraud" : "");
-            slog(S, "stability/shadow: %s", spec);
+            rp_exp_log(S->p, "stability/shadow: %s", spec);
             sopt sr = {.want = RP_WANT_IMAGE, .budget = 120};
             if ((st = srun_do(S, sc, spec, &sr, &r, err)) != RP_OK)
                 break;
@@ -1436,7 +1417,7 @@ static rp_status sec_shadow(stab *S, rp_error *err)
                                              {"hierarchical bf-epsilon 5e-4", "hierarchical:bf-epsilon=5e-4"},
                                              {"pathtrace 16 spp", "pathtrace:spp=16"}};
     for (int k = 0; k < 3 && st == RP_OK; k++) {
-        slog(S, "stability/shadow: %s", others[k][0]);
+        rp_exp_log(S->p, "stability/shadow: %s", others[k][0]);
         sopt sr = {.want = RP_WANT_IMAGE, .budget = 120, .seed = 7};
         if ((st = srun_do(S, sc, others[k][1], &sr, &r, err)) != RP_OK)
             break;
@@ -1697,7 +1678,7 @@ static rp_status sec_acne(stab *S, rp_error *err)
                 snprintf(spec, sizeof spec, "%s:ray-offset=%g", M[m].spec, offs[k]);
             else
                 snprintf(spec, sizeof spec, "%s", M[m].spec);
-            slog(S, "stability/acne: %s", spec);
+            rp_exp_log(S->p, "stability/acne: %s", spec);
             sopt so = {.want = RP_WANT_SURFACES, .budget = 60};
             srun r;
             rp_error rerr;
@@ -1710,7 +1691,7 @@ static rp_status sec_acne(stab *S, rp_error *err)
                 /* a refusal is a signature, not a failure of the atlas */
                 rows[k].failed[m] = 1;
                 snprintf(rows[k].msg[m], sizeof rows[k].msg[m], "%.380s", rerr.message);
-                slog(S, "  refused: %s", rerr.message);
+                rp_exp_log(S->p, "  refused: %s", rerr.message);
                 st = RP_OK;
                 continue;
             }
@@ -1952,7 +1933,7 @@ static rp_status sec_nonphysical(stab *S, rp_error *err)
         fprintf(csv.f, "%s,scenes/%s,%d,%d,", cases[k][0], file, ps != RP_OK, code);
         put(S, csv.f, "%.3g,", secs, "nonphysical seconds");
         fprintf(csv.f, "%s\n", quoted);
-        slog(S, "stability/nonphysical %s: %s", cases[k][0], clean);
+        rp_exp_log(S->p, "stability/nonphysical %s: %s", cases[k][0], clean);
     }
     rp_status st2 = rp_out_close(&csv, st == RP_OK, err);
     if (st == RP_OK)
@@ -1994,7 +1975,7 @@ rp_status rp_exp_stability(const rp_experiment_params *p, rp_error *err)
         double t1 = rp_clock();
         st = sections[i].run(&S, err);
         sections[i].seconds = rp_clock() - t1;
-        slog(&S, "stability: %s took %.1f s", sections[i].name, sections[i].seconds);
+        rp_exp_log(S.p, "stability: %s took %.1f s", sections[i].name, sections[i].seconds);
     }
     double total = rp_clock() - t0;
     fclose(S.md);

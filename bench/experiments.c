@@ -22,13 +22,7 @@
 
 /* ------------------------------------------------------------- helpers */
 
-static void xlog(const rp_experiment_params *p, const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 2, 3)))
-#endif
-    ;
-
-static void xlog(const rp_experiment_params *p, const char *fmt, ...)
+void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
 {
     if (!p->log)
         return;
@@ -112,7 +106,7 @@ static rp_status run_bench(const rp_experiment_params *p, const rp_scene *scene,
         char note[256];
         st = rp_bench_write(b, dir, out, note, err);
         if (st == RP_OK && note[0])
-            xlog(p, "%s", note);
+            rp_exp_log(p, "%s", note);
     }
     free(methods);
     if (st == RP_OK && bench_out) {
@@ -218,7 +212,7 @@ static rp_status draw(const rp_experiment_params *p, const char *body, char *not
     rp_error gerr;
     if (rp_gnuplot_run(p->out_dir, "plots.gp", &gerr) != RP_OK) {
         snprintf(note, nn, "charts not drawn: %.200s", gerr.message);
-        xlog(p, "%s", note);
+        rp_exp_log(p, "%s", note);
     }
     return RP_OK;
 }
@@ -359,11 +353,11 @@ static rp_status exp_furnace(const rp_experiment_params *p, rp_error *err)
             row->method = specs[i];
             /* Jacobi from B = E: relative error rho^(k+1) after k sweeps */
             row->theory_sweeps = log(tol) / log(rhos[r]) - 1;
-            xlog(p, "furnace rho %g: %s", rhos[r], specs[i]);
+            rp_exp_log(p, "furnace rho %g: %s", rhos[r], specs[i]);
             st = furnace_run(scene, L, &m[i], tol, budget, p->threads, nelements, row, err);
             if (st == RP_OK) {
                 nrows++;
-                xlog(p, "  %s after %.3g s, %.0f iterations, error %.3g", row->reached ? "reached" : "NOT reached",
+                rp_exp_log(p, "  %s after %.3g s, %.0f iterations, error %.3g", row->reached ? "reached" : "NOT reached",
                      row->seconds, row->iterations, row->error);
             }
         }
@@ -638,7 +632,7 @@ static rp_status exp_formfactors(const rp_experiment_params *p, rp_error *err)
         for (int mi = 0; mi < 3 && st == RP_OK; mi++) {
             fprintf(dat.f, "# cost: %s, %s: seconds rel_error\n", su.name, rp_ff_method_name(methods[mi]));
             size_t np = mi == 0 ? ntol : (mi == 1 ? nsam : nres);
-            xlog(p, "formfactors: %s, %s", su.name, rp_ff_method_name(methods[mi]));
+            rp_exp_log(p, "formfactors: %s, %s", su.name, rp_ff_method_name(methods[mi]));
             for (size_t k = 0; k < np && st == RP_OK; k++) {
                 rp_ff_params prm = {.size = sizeof prm, .method = methods[mi]};
                 double param;
@@ -664,7 +658,7 @@ static rp_status exp_formfactors(const rp_experiment_params *p, rp_error *err)
     /* distance: default settings, parallel squares */
     for (int mi = 0; mi < 3 && st == RP_OK; mi++) {
         fprintf(dat.f, "# distance: %s at its default: c exact rel_error\n", rp_ff_method_name(methods[mi]));
-        xlog(p, "formfactors: distance sweep, %s", rp_ff_method_name(methods[mi]));
+        rp_exp_log(p, "formfactors: distance sweep, %s", rp_ff_method_name(methods[mi]));
         for (size_t d = 0; d < ndist && st == RP_OK; d++) {
             ff_setup su;
             if ((st = ff_setup_make(dist[d], &su, err)) != RP_OK)
@@ -787,7 +781,7 @@ static rp_status exp_meshing(const rp_experiment_params *p, rp_error *err)
             rp_method_spec m;
             if ((st = rp_method_spec_parse(spec, &m, err)) != RP_OK)
                 break;
-            xlog(p, "meshing: %s", spec);
+            rp_exp_log(p, "meshing: %s", spec);
             rp_harness_params hp = {.size = sizeof hp, .budget = budget, .levels = 1, .threads = p->threads,
                                     .stop_when_converged = 1, .progress = p->progress,
                                     .progress_ctx = p->progress_ctx};
@@ -804,7 +798,7 @@ static rp_status exp_meshing(const rp_experiment_params *p, rp_error *err)
                     w->seconds = cp->wall_s;
                     w->converged = cp->converged;
                 }
-                xlog(p, "  %zu elements, h %.4g: RMSE %.4g, surface error %.4g (%.1f s)", w->elements, w->h,
+                rp_exp_log(p, "  %zu elements, h %.4g: RMSE %.4g, surface error %.4g (%.1f s)", w->elements, w->h,
                      cp->rmse,
                      cp->surface_err, cp->wall_s);
             }

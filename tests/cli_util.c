@@ -9,9 +9,15 @@
 
 static char *slurp(const char *path)
 {
+    char *s = rp_read_file(path);
+    return s ? s : calloc(1, 1);
+}
+
+char *rp_read_file(const char *path)
+{
     FILE *f = fopen(path, "rb");
     if (!f)
-        return calloc(1, 1);
+        return NULL;
     fseek(f, 0, SEEK_END);
     long n = ftell(f);
     fseek(f, 0, SEEK_SET);

@@ -18,6 +18,9 @@ void rp_run_free(rp_run *r);
  * of anchor (a string that must occur in text); NAN if absent. */
 double rp_json_number_after(const char *text, const char *anchor, const char *key);
 
+/* A whole file, NUL-terminated (malloc'd), or NULL if it cannot be read. */
+char *rp_read_file(const char *path);
+
 /* Number of lines in s. */
 size_t rp_count_lines(const char *s);
 

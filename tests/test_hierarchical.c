@@ -41,21 +41,11 @@
 #include "solvers/radiosity/hier_internal.h"
 #include "solvers/radiosity/hierarchical.h"
 #include "solvers/solver.h"
+#include "scene_util.h"
 
 extern const rp_solver_type rp_solver_pathtrace;
 
 static void hsetup(void) { gsl_set_error_handler_off(); }
-
-static rp_scene *hload(const char *rel)
-{
-    char path[1024];
-    snprintf(path, sizeof path, "%s/%s", RP_SOURCE_DIR, rel);
-    rp_scene *s = NULL;
-    rp_error err = {""};
-    rp_status st = rp_scene_load(path, &s, &err);
-    cr_assert_eq(st, RP_OK, "scene %s: %s", rel, err.message);
-    return s;
-}
 
 /* The last message a solver logged. */
 static char last_log[1024];
@@ -158,7 +148,7 @@ Test(hier, contour_kernel, .init = hsetup)
 
 Test(hier, furnace_unrefined, .init = hsetup)
 {
-    rp_scene *scene = hload("scenes/furnace.scene");
+    rp_scene *scene = rp_test_load("scenes/furnace.scene");
     hrun r;
     /* No link is ever worth refining: every leaf is a face. */
     const char *kv[] = {"bf-epsilon", "1e6", "tolerance", "1e-12", NULL};
@@ -188,7 +178,7 @@ Test(hier, furnace_unrefined, .init = hsetup)
  * the last change). */
 static void furnace_check(const char *const *kv, double tol, size_t min_leaves)
 {
-    rp_scene *scene = hload("scenes/furnace.scene");
+    rp_scene *scene = rp_test_load("scenes/furnace.scene");
     hrun r;
     solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
     cr_assert_eq(rp_hierarchical_enclosure(r.state), 1, "the furnace is an enclosure");
@@ -241,7 +231,7 @@ Test(hier, enclosure_detection, .init = hsetup)
     static const char *scenes[] = {"scenes/cube-ceiling.scene", "scenes/furnace.scene", "scenes/cornell.scene"};
     static const int want[] = {1, 1, 0};
     for (int k = 0; k < 3; k++) {
-        rp_scene *scene = hload(scenes[k]);
+        rp_scene *scene = rp_test_load(scenes[k]);
         hrun r;
         rp_error err = {""};
         cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_SURFACES, 0, NULL, &err), RP_OK, "%s",
@@ -256,7 +246,7 @@ Test(hier, enclosure_detection, .init = hsetup)
 
 Test(hier, cube_against_pathtrace, .init = hsetup, .timeout = 600)
 {
-    rp_scene *scene = hload("scenes/cube-ceiling.scene");
+    rp_scene *scene = rp_test_load("scenes/cube-ceiling.scene");
     const size_t ns = rp_scene_nsurfaces(scene);
     cr_assert_eq(rp_scene_nbands(scene), 1);
     double h[8], pt[8], se[8];
@@ -297,7 +287,7 @@ Test(hier, cube_against_pathtrace, .init = hsetup, .timeout = 600)
 
 Test(hier, links_grow_as_epsilon_shrinks, .init = hsetup, .timeout = 600)
 {
-    rp_scene *scene = hload("scenes/cube-ceiling.scene");
+    rp_scene *scene = rp_test_load("scenes/cube-ceiling.scene");
     /* bf-epsilon and min-area shrink together, so the leaves are not held
      * back by the area floor. */
     static const char *eps[] = {"0.3", "0.1", "0.03", "0.01"};
@@ -342,7 +332,7 @@ Test(hier, links_grow_as_epsilon_shrinks, .init = hsetup, .timeout = 600)
 
 Test(hier, gouraud_is_crack_free, .init = hsetup, .timeout = 300)
 {
-    rp_scene *scene = hload("scenes/cornell.scene");
+    rp_scene *scene = rp_test_load("scenes/cornell.scene");
     hrun r;
     const char *kv[] = {"bf-epsilon", "0.1", NULL};
     solve_hier(&r, scene, RP_WANT_IMAGE, 0, kv);
@@ -402,7 +392,7 @@ Test(hier, gouraud_is_crack_free, .init = hsetup, .timeout = 300)
 
 Test(hier, same_answer_for_any_thread_count, .init = hsetup, .timeout = 300)
 {
-    rp_scene *scene = hload("scenes/cornell.scene");
+    rp_scene *scene = rp_test_load("scenes/cornell.scene");
     const rp_camera *cam = rp_scene_camera(scene);
     const size_t nb = rp_scene_nbands(scene), npix = (size_t)cam->width * cam->height;
     float *img[2];
@@ -436,7 +426,7 @@ Test(hier, same_answer_for_any_thread_count, .init = hsetup, .timeout = 300)
  * nothing and the link array, its order and the offsets are unchanged. */
 Test(hier, idle_refinement_keeps_links, .init = hsetup, .timeout = 120)
 {
-    rp_scene *scene = hload("scenes/cube-ceiling.scene");
+    rp_scene *scene = rp_test_load("scenes/cube-ceiling.scene");
     hrun r;
     const char *kv[] = {"bf-epsilon", "0.1", NULL};
     solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
@@ -464,7 +454,7 @@ Test(hier, idle_refinement_keeps_links, .init = hsetup, .timeout = 120)
 
 Test(hier, refuses_bad_options, .init = hsetup)
 {
-    rp_scene *scene = hload("scenes/cube-ceiling.scene");
+    rp_scene *scene = rp_test_load("scenes/cube-ceiling.scene");
     rp_error err = {""};
     hrun r;
     const char *bad[] = {"reconstruct", "phong", NULL};

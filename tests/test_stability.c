@@ -27,27 +27,12 @@ typedef struct csv {
     char *buf;
 } csv;
 
-static char *slurp_file(const char *path)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    fseek(f, 0, SEEK_END);
-    long n = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    char *s = malloc((size_t)n + 1);
-    size_t got = fread(s, 1, (size_t)n, f);
-    s[got] = '\0';
-    fclose(f);
-    return s;
-}
-
 static csv *csv_read(const char *dir, const char *name)
 {
     char path[512];
     snprintf(path, sizeof path, "%s/%s", dir, name);
     csv *c = calloc(1, sizeof *c);
-    c->buf = slurp_file(path);
+    c->buf = rp_read_file(path);
     cr_assert_not_null(c->buf, "%s missing", path);
     char *save = NULL;
     for (char *line = strtok_r(c->buf, "\n", &save); line && c->nrows < 512; line = strtok_r(NULL, "\n", &save)) {
@@ -154,7 +139,7 @@ Test(stability, quick_atlas, .timeout = 240)
     /* the report and its sections */
     char path[256];
     snprintf(path, sizeof path, "%s/report.md", dir);
-    char *report = slurp_file(path);
+    char *report = rp_read_file(path);
     cr_assert_not_null(report);
     static const char *const heads[] = {"## 1. Reflectance", "## 2. A shrinking light", "## 3. Corners",
                                         "## 4. A block", "## 5. A sharp shadow", "## 6. Thin and coincident",
