@@ -79,12 +79,14 @@ static rp_reference_params ref_params(const rp_experiment_params *p, unsigned lo
     return r;
 }
 
-/* Loads a scene, gets its reference, runs a bench over a method list and
- * writes the standard output into dir. */
-static rp_status run_bench(const rp_experiment_params *p, const rp_scene *scene, const char *scene_name,
-                           const char *list, double budget, unsigned nseeds, unsigned long ref_spp,
-                           const rp_bench_output *out, const char *dir, rp_bench **bench_out,
-                           rp_reference **ref_out, rp_error *err)
+/* Gets the scene's reference, runs a bench over a method list with
+ * checkpoints at budget x 2^-k, k < levels (budget in seconds or, with
+ * RP_SCHEDULE_ITERATIONS, in iterations) and writes the standard output
+ * into dir. */
+static rp_status run_bench_scheduled(const rp_experiment_params *p, const rp_scene *scene, const char *scene_name,
+                                     const char *list, rp_schedule schedule, double budget, unsigned levels,
+                                     unsigned nseeds, unsigned long ref_spp, const rp_bench_output *out,
+                                     const char *dir, rp_bench **bench_out, rp_reference **ref_out, rp_error *err)
 {
     rp_method_spec *methods = NULL;
     size_t n = 0;
@@ -97,8 +99,8 @@ static rp_status run_bench(const rp_experiment_params *p, const rp_scene *scene,
     }
     if (st == RP_OK) {
         rp_bench_params bp = {.size = sizeof bp, .nseeds = nseeds, .seed = 1, .log = p->log, .log_ctx = p->log_ctx};
-        bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = 9,
-                                     .schedule = RP_SCHEDULE_TIME, .threads = p->threads, .keep_image = 1,
+        bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = levels,
+                                     .schedule = schedule, .threads = p->threads, .keep_image = 1,
                                      .progress = p->progress, .progress_ctx = p->progress_ctx};
         st = rp_bench_run(scene, scene_name, ref, methods, n, &bp, &b, err);
     }
@@ -120,6 +122,16 @@ static rp_status run_bench(const rp_experiment_params *p, const rp_scene *scene,
     rp_bench_destroy(b);
     rp_reference_destroy(ref);
     return st;
+}
+
+/* run_bench_scheduled by time, 9 checkpoints. */
+static rp_status run_bench(const rp_experiment_params *p, const rp_scene *scene, const char *scene_name,
+                           const char *list, double budget, unsigned nseeds, unsigned long ref_spp,
+                           const rp_bench_output *out, const char *dir, rp_bench **bench_out,
+                           rp_reference **ref_out, rp_error *err)
+{
+    return run_bench_scheduled(p, scene, scene_name, list, RP_SCHEDULE_TIME, budget, 9, nseeds, ref_spp, out, dir,
+                               bench_out, ref_out, err);
 }
 
 /* The path-traced references the Cornell experiments share (one cache
@@ -897,41 +909,20 @@ static rp_status exp_progressive(const rp_experiment_params *p, rp_error *err)
              "southwell:elements=%u,southwell:elements=%u:ambient,southwell:elements=%u:overshoot=1.5,"
              "southwell:elements=%u:ambient:overshoot=1.5",
              elements, elements, elements, elements);
-    rp_method_spec *methods = NULL;
-    size_t n = 0;
-    rp_reference *ref = NULL;
-    rp_bench *b = NULL;
-    st = rp_method_list_parse(list, &methods, &n, err);
-    if (st == RP_OK) {
-        rp_reference_params rp = ref_params(p, REF_SPP(p));
-        st = rp_reference_get(scene, path, &rp, &ref, err);
-    }
-    if (st == RP_OK) {
-        rp_bench_params bp = {.size = sizeof bp, .nseeds = 1, .seed = 1, .log = p->log, .log_ctx = p->log_ctx};
-        bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = shots, .levels = 10,
-                                     .schedule = RP_SCHEDULE_ITERATIONS, .threads = p->threads, .keep_image = 1,
-                                     .progress = p->progress, .progress_ctx = p->progress_ctx};
-        st = rp_bench_run(scene, path, ref, methods, n, &bp, &b, err);
-    }
-    if (st == RP_OK) {
-        char preface[1200];
-        snprintf(preface, sizeof preface,
-                 "Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988) on the Cornell box with "
-                 "%u elements, checkpoints every doubling of the number of shots up to %g: classic shooting, with "
-                 "the ambient term shown (unshot power spread uniformly, sec. 4 of the paper), with overshooting "
-                 "(1.5 x the unshot radiosity), and both. The ambient term makes early images close to the answer "
-                 "in the mean; overshooting speeds the convergence of the residual. The chart against samples is "
-                 "the error per shot (samples = shots here).",
-                 elements, shots);
-        rp_bench_output out = {.size = sizeof out, .title = "Experiment progressive: error per shot",
-                               .preface = preface, .samples_chart = 1, .samples_label = "shots",
-                               .sheet = 1, .command = p->command};
-        char note[256];
-        st = rp_bench_write(b, p->out_dir, &out, note, err);
-    }
-    free(methods);
-    rp_bench_destroy(b);
-    rp_reference_destroy(ref);
+    char preface[1200];
+    snprintf(preface, sizeof preface,
+             "Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988) on the Cornell box with "
+             "%u elements, checkpoints every doubling of the number of shots up to %g: classic shooting, with "
+             "the ambient term shown (unshot power spread uniformly, sec. 4 of the paper), with overshooting "
+             "(1.5 x the unshot radiosity), and both. The ambient term makes early images close to the answer "
+             "in the mean; overshooting speeds the convergence of the residual. The chart against samples is "
+             "the error per shot (samples = shots here).",
+             elements, shots);
+    rp_bench_output out = {.size = sizeof out, .title = "Experiment progressive: error per shot",
+                           .preface = preface, .samples_chart = 1, .samples_label = "shots",
+                           .sheet = 1, .command = p->command};
+    st = run_bench_scheduled(p, scene, path, list, RP_SCHEDULE_ITERATIONS, shots, 10, 1, REF_SPP(p), &out,
+                             p->out_dir, NULL, NULL, err);
     rp_scene_destroy(scene);
     return st;
 }
