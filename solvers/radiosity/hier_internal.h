@@ -15,7 +15,8 @@
 
 /* Per-band arrays on the stack. */
 #define HIER_MAX_BANDS 256
-/* Initial links are refused above this many faces by default (O(n^2)). */
+/* Without clustering, scenes with more faces are refused by default (the
+ * initial linking is O(n^2)). */
 #define HIER_DEFAULT_MAX_FACES 4096
 /* Root-pair occluder lists (shaft culling) up to this many faces. */
 #define HIER_CULL_MAX_FACES 512
@@ -71,6 +72,42 @@ typedef struct hier_face {
     int reflects;       /* some band of rho is > 0 */
 } hier_face;
 
+/* A cluster (Smits, Arvo & Greenberg 1994): a node of a binary bounding-
+ * volume hierarchy over the face roots (hier_cluster.c).  Items are face
+ * roots (ids below nfaces) and clusters (nfaces + cluster index); clusters
+ * are numbered in preorder, so a parent comes before its children. */
+typedef struct hier_cluster {
+    rp_vec3 lo, hi;      /* bounding box of its faces */
+    rp_vec3 c;           /* box centre */
+    double r;            /* half the box diagonal */
+    double area;         /* sum of its faces' areas */
+    rp_vec3 axis;        /* normal cone: unit axis and half-angle cosine */
+    double cone_cos;     /* (-1 when the normals span more than a hemisphere) */
+    double cone_sin;
+    rp_vec3 nbar;        /* area-weighted mean normal (not unit) */
+    int planar;          /* every face in the plane dot(axis, x) = pd */
+    double pd;
+    uint32_t child[2];   /* items */
+    uint32_t parent;     /* cluster index, RP_NONE for the root */
+    uint32_t first, count; /* range in cl_faces */
+} hier_cluster;
+
+/* A link with a cluster at one end or both: the receiver gathers F B_src,
+ * B_src the source's area-mean radiosity (hier_cluster.c). */
+typedef struct hier_clink {
+    uint32_t recv, src; /* items */
+    double F;
+    /* A cluster receiver hands face f below it the share
+     * w0 (1 + n_f . u) of F (hier_cluster.c); u = 0, w0 = 1 otherwise. */
+    float u[3];
+    float w0;
+} hier_clink;
+
+/* Items at or above this id are clusters, below it quadtree nodes. */
+#define HIER_CL_BIT 0x80000000u
+/* Clustering is on above this many faces with --cluster auto. */
+#define HIER_CLUSTER_AUTO_FACES 512
+
 typedef enum hier_recon {
     HIER_RECON_FLAT,
     HIER_RECON_GOURAUD,
@@ -123,6 +160,35 @@ typedef struct hier_state {
     uint16_t *pair_cnt;
     uint32_t *cand;
     size_t ncand;
+
+    /* Clustering (hier_cluster.c); all NULL / 0 when it is off. */
+    int clustering;
+    size_t ncl;
+    hier_cluster *cl;
+    uint32_t *cl_faces;  /* faces in hierarchy order */
+    double *cl_cum;      /* nfaces + 1 cumulative areas in that order */
+    uint32_t *face_pos;  /* nfaces: position of each face in cl_faces */
+    uint32_t *face_cl;   /* nfaces: the cluster a face root is a child of */
+    double *cl_rho;      /* ncl x nb: largest reflectance below */
+    double *cl_B;        /* ncl x nb: area-mean radiosity */
+    double *cl_G;        /* ncl x nb x 4: gathered F B per cluster (constant
+                            and linear-in-normal parts) */
+    double *cl_acc;      /* ncl x nb x 4: gathered, pushed down */
+    double *cl_push;     /* nfaces x nb: rho x cluster-gathered radiosity of each root */
+    double *cl_ff;       /* nfaces: cluster-link form factors reaching each root
+                            through the clusters above it */
+    double *cl_ffacc;    /* ncl x 4 */
+    double *cl_nff;      /* per node (cl_nn of them): form factors of the
+                            cluster links the node receives itself */
+    unsigned char *cl_nreach; /* per node: some cluster link reaches it
+                            (its own, or a cluster's above a root) */
+    size_t cl_nn;
+    hier_clink *clinks;
+    size_t nclinks, cap_clinks;
+    size_t clinks_refined, clinks_culled;
+    size_t clinks_initial, links_initial;
+    unsigned cluster_rays;
+    double cl_area_rel, cl_area; /* power-error area scale (relative, absolute) */
 
     /* Parameters. */
     double bf_rel, min_area_rel;   /* as given: relative */
@@ -179,6 +245,26 @@ rp_status hier_link_initial(hier_state *s, rp_error *err);
 /* One refinement pass with the current radiosities (Hanrahan et al. 1991,
  * sec. 5, "BF refinement"); *refined gets the links replaced. */
 rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err);
+
+/* Evaluates face-level link q <- p (0: none, 1: link, 2: every ray blocked). */
+int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out, double *rays);
+/* Appends n face-level links and re-sorts the list by receiver. */
+rp_status hier_links_add(hier_state *s, const hier_link *add, size_t n, rp_error *err);
+
+/* ---- hier_cluster.c ---- */
+
+/* Builds the cluster hierarchy over the face roots. */
+rp_status hier_cluster_init(hier_state *s, rp_error *err);
+/* One refinement pass over the cluster links (the first one starts from
+ * the root's self-link); face pairs become face-level links. */
+rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err);
+/* Gathers over the cluster links with the current radiosities and pushes
+ * the result down to the face roots (cl_push), before hier_sweep. */
+void hier_cluster_gather(hier_state *s);
+/* Adds rho F B_src of the cluster links received by quadtree nodes to Bg
+ * (hier_sweep, between its gather and its push). */
+void hier_cluster_gather_nodes(hier_state *s, double *Bg);
+void hier_cluster_free(hier_state *s);
 
 /* ---- hier_image.c ---- */
 

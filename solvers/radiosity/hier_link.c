@@ -182,7 +182,7 @@ static double point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hie
 /* Evaluates link q <- p into *out.  Returns 0 if there is no link (the two
  * do not face each other, or no part of q sees p), 1 for a link, 2 for a
  * link every visibility ray found blocked (not stored). */
-static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out, double *rays)
+int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out, double *rays)
 {
     const hier_node *q = &s->nodes[qi], *p = &s->nodes[pi];
     if (q->face == p->face)
@@ -391,6 +391,17 @@ static rp_status links_adopt(hier_state *s, const hier_link *links, size_t n, rp
     return RP_OK;
 }
 
+rp_status hier_links_add(hier_state *s, const hier_link *add, size_t n, rp_error *err)
+{
+    if (n == 0)
+        return RP_OK;
+    rp_status st = reserve_links(&s->links, &s->cap_links, s->nlinks + n, err);
+    if (st != RP_OK)
+        return st;
+    memcpy(s->links + s->nlinks, add, n * sizeof *add);
+    return links_adopt(s, s->links, s->nlinks + n, err);
+}
+
 rp_status hier_link_initial(hier_state *s, rp_error *err)
 {
     const size_t n = s->nfaces;
@@ -413,7 +424,7 @@ rp_status hier_link_initial(hier_state *s, rp_error *err)
         for (long i = (long)i0; i < (long)i1; i++)
             for (long j = 0; j < (long)n; j++) {
                 size_t at = (size_t)(i - (long)i0) * n + (size_t)j;
-                code[at] = i == j ? 0 : (unsigned char)link_eval(s, (uint32_t)i, (uint32_t)j, &buf[at], &rays);
+                code[at] = i == j ? 0 : (unsigned char)hier_link_eval(s, (uint32_t)i, (uint32_t)j, &buf[at], &rays);
             }
         s->rays += rays;
         for (size_t k = 0; k < (i1 - i0) * n; k++) {
@@ -444,7 +455,11 @@ static int decide(const hier_state *s, const hier_link *l)
     double e = 0;
     for (size_t b = 0; b < nb; b++)
         e = hier_max(e, rho[b] * Bp[b]);
-    if (!(e * l->F_err > s->bf_eps))
+    /* With clustering, elements smaller than cl_area are judged by the
+     * error in the power they receive instead of their radiosity
+     * (Smits, Arvo & Greenberg 1994, sec. 4): e x F x A_q / cl_area. */
+    double scale = s->clustering ? hier_min(1.0, q->area / s->cl_area) : 1.0;
+    if (!(e * l->F_err * scale > s->bf_eps))
         return 0;
     int can_q = 0.25 * q->area >= s->min_area, can_p = 0.25 * p->area >= s->min_area;
     if (!s->faces[p->face].reflects && !(l->flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE)))
@@ -652,7 +667,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                 qi = s->nodes[qi].child + c;
             else
                 pi = s->nodes[pi].child + c;
-            code[t] = (unsigned char)link_eval(s, qi, pi, &cand[t], &rays);
+            code[t] = (unsigned char)hier_link_eval(s, qi, pi, &cand[t], &rays);
         }
         s->rays += rays;
         if (!grow((void **)&fresh, &capf, ns * 4, sizeof *fresh))

@@ -347,6 +347,10 @@ size_t hier_bytes(const hier_state *s)
     size_t b = s->cap_nodes * (sizeof(hier_node) + (3 * s->nb + 1) * sizeof(double));
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
+    if (s->clustering)
+        b += s->ncl * (sizeof(hier_cluster) + (10 * s->nb + 4) * sizeof(double)) +
+             s->nfaces * (3 * sizeof(uint32_t) + (2 + s->nb) * sizeof(double)) +
+             s->cl_nn * (sizeof(double) + 1) + s->cap_clinks * sizeof(hier_clink);
     if (s->cull)
         b += s->nfaces * s->nfaces * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t);
     return b;

@@ -22,7 +22,17 @@
  * when a pass refined nothing and the sweep changed the energy by less than
  * --tolerance:
  *     max_b sum_leaves A |B' - B| / sum_faces A E,
- * the same power norm the uniform solvers use for their residual. */
+ * the same power norm the uniform solvers use for their residual.
+ *
+ * Clustering (hier_cluster.c; Smits, Arvo & Greenberg 1994): above 512
+ * faces (--cluster auto) the face roots are the leaves of a cluster
+ * hierarchy and linking starts from one self-link at the root cluster
+ * instead of every pair of faces.  Cluster links gather with the isotropic
+ * approximation; what clusters gather is pushed down to the face roots
+ * (cl_push, below), and links to quadtree nodes from clusters add to the
+ * nodes' gathered radiosity.  Elements and clusters smaller than
+ * --cluster-area are then refined by their error in power, not radiosity.
+ * With clustering off (the default below 512 faces) nothing here changes. */
 #include <math.h>
 #include <omp.h>
 #include <stdarg.h>
@@ -59,8 +69,17 @@ static const rp_option_spec hier_options[] = {
      "was refined",
      "1e-6"},
     {"max-iterations", "N", "stop after N sweeps", "1000"},
-    {"max-faces", "N", "refuse scenes with more faces (the initial linking is O(faces^2))",
-     "4096"},
+    {"max-faces", "N",
+     "without clustering, refuse scenes with more faces (the initial linking is O(faces^2))", "4096"},
+    {"cluster", "auto|on|off",
+     "cluster the faces (Smits, Arvo & Greenberg 1994) and link from the root cluster instead of "
+     "every pair of faces; auto: on above 512 faces",
+     "auto"},
+    {"cluster-rays", "N", "point pairs (and visibility rays) per cluster link form factor", "16"},
+    {"cluster-area", "FRAC",
+     "with clustering, links to elements and clusters smaller than FRAC x the total area are "
+     "refined by the error in power (B x F x area) rather than radiosity",
+     "1e-3"},
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
     {"spp", "N", "image: camera rays per pixel (stratified, box filter)", "16"},
@@ -105,6 +124,7 @@ static void hier_fini(void *state)
     free(s->pair_off);
     free(s->pair_cnt);
     free(s->cand);
+    hier_cluster_free(s);
     memset(s, 0, sizeof *s);
 }
 
@@ -164,7 +184,11 @@ static void chain_sums(const hier_state *s, double *sum)
         if (s->link_start)
             for (uint32_t k = s->link_start[i]; k < s->link_start[i + 1]; k++)
                 own += s->links[k].F;
-        sum[i] = own + (nd->parent == RP_NONE ? 0 : sum[nd->parent]);
+        if (s->cl_nff && i < s->cl_nn)
+            own += s->cl_nff[i]; /* cluster links it receives (hier_cluster.c) */
+        /* A root also gathers through the cluster links above it. */
+        double up = nd->parent != RP_NONE ? sum[nd->parent] : (s->cl_ff ? s->cl_ff[i] : 0);
+        sum[i] = own + up;
     }
 }
 
@@ -223,7 +247,8 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->partial_weight = 10;
     s->invisible_weight = 0.25;
     s->tolerance = 1e-6;
-    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16;
+    s->cl_area_rel = 1e-3;
+    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16;
     s->max_faces = HIER_DEFAULT_MAX_FACES;
     if ((st = rp_options_double(o, "bf-epsilon", 0, 1e6, &s->bf_rel, err)) != RP_OK ||
         (st = rp_options_double(o, "min-area", 1e-15, 1, &s->min_area_rel, err)) != RP_OK ||
@@ -234,8 +259,22 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         (st = rp_options_uint(o, "max-iterations", 1, 1000000000ul, &maxit, err)) != RP_OK ||
         (st = rp_options_uint(o, "max-faces", 1, 1000000000ul, &s->max_faces, err)) != RP_OK ||
         (st = rp_options_uint(o, "spp", 1, 1u << 20, &spp, err)) != RP_OK ||
-        (st = rp_options_uint(o, "gather-rays", 1, 1u << 20, &gr, err)) != RP_OK)
+        (st = rp_options_uint(o, "gather-rays", 1, 1u << 20, &gr, err)) != RP_OK ||
+        (st = rp_options_uint(o, "cluster-rays", 1, 256, &crays, err)) != RP_OK ||
+        (st = rp_options_double(o, "cluster-area", 0, 1, &s->cl_area_rel, err)) != RP_OK)
         return st;
+    s->cluster_rays = (unsigned)crays;
+    const char *cm = rp_options_get(o, "cluster");
+    if (!cm || strcmp(cm, "auto") == 0)
+        s->clustering = s->nfaces > HIER_CLUSTER_AUTO_FACES;
+    else if (strcmp(cm, "on") == 0)
+        s->clustering = 1;
+    else if (strcmp(cm, "off") == 0)
+        s->clustering = 0;
+    else
+        return rp_error_set(err, RP_ERR_INPUT, "--cluster: '%s' is not auto, on or off", cm);
+    if (s->nfaces < 2)
+        s->clustering = 0;
     s->tolerance_given = rp_options_get(o, "tolerance") != NULL;
     s->max_iterations_given = rp_options_get(o, "max-iterations") != NULL;
     s->vis_rays = (unsigned)vis;
@@ -254,11 +293,11 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         else
             return rp_error_set(err, RP_ERR_INPUT, "--reconstruct: '%s' is not flat, gouraud or gather", rm);
     }
-    if (s->nfaces > s->max_faces)
+    if (!s->clustering && s->nfaces > s->max_faces)
         return rp_error_set(err, RP_ERR_UNSUPPORTED,
                             "hierarchical: %zu faces; the initial linking of every pair of faces "
                             "(%.3g pairs) is the limit of this method without clustering "
-                            "(Smits et al. 1994); raise --max-faces to try anyway",
+                            "(Smits et al. 1994, --cluster on); raise --max-faces to try anyway",
                             s->nfaces, (double)s->nfaces * (double)s->nfaces);
 
     /* Per-face data: plane, box, material. */
@@ -296,6 +335,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         emean = hier_max(emean, s->e_norm[b] / rp_scene_total_area(scene));
     s->bf_eps = s->bf_rel * emean;
     s->min_area = s->min_area_rel * s->total_area;
+    s->cl_area = s->cl_area_rel * s->total_area;
     s->eps = 1e-9 * rp_scene_diagonal(scene);
 
     if ((st = rp_raycast_create(scene, NULL, &s->rc, err)) != RP_OK)
@@ -305,6 +345,8 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     if ((st = hier_nodes_init(s, err)) != RP_OK)
         return st;
     if ((st = hier_cull_init(s, err)) != RP_OK)
+        return st;
+    if (s->clustering && (st = hier_cluster_init(s, err)) != RP_OK)
         return st;
     s->enclosure = scene_is_enclosure(s);
     s->residual = -1;
@@ -398,17 +440,20 @@ static double hier_sweep(hier_state *s)
         for (size_t b = 0; b < nb; b++)
             Bg[(size_t)qi * nb + b] = rho[b] * acc[b];
     }
+    hier_cluster_gather_nodes(s, Bg);
     /* Push (sec. 4.2): parents come before their children in node order.
      * W temporarily marks nodes that some link reaches (theirs or an
      * ancestor's). */
     double *W = s->W;
     for (size_t i = 0; i < nn; i++) {
         const hier_node *nd = &s->nodes[i];
-        int reached = start[i + 1] > start[i];
-        if (nd->parent == RP_NONE)
+        int reached = start[i + 1] > start[i] || (s->cl_nreach && i < s->cl_nn && s->cl_nreach[i]);
+        if (nd->parent == RP_NONE) {
+            /* Roots start from what the clusters above them gathered
+             * (hier_cluster.c), nothing without clustering. */
             for (size_t b = 0; b < nb; b++)
-                Bd[i * nb + b] = 0;
-        else
+                Bd[i * nb + b] = s->cl_push ? s->cl_push[i * nb + b] : 0;
+        } else
             reached |= W[nd->parent] > 0;
         W[i] = reached;
         if (nd->child == RP_NONE)
@@ -488,6 +533,11 @@ static void stats_fill(const hier_state *s, rp_hier_stats *o)
     o->residual = s->residual;
     o->rays = s->rays;
     o->bytes = hier_bytes(s);
+    o->clusters = s->ncl;
+    o->cluster_links = s->nclinks;
+    o->cluster_links_refined = s->clinks_refined;
+    o->cluster_links_culled = s->clinks_culled;
+    o->initial_links = s->links_initial + s->clinks_initial;
 }
 
 static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
@@ -495,17 +545,33 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
     hier_state *s = state;
     rp_status st;
     double rays0 = s->rays, ff0 = s->form_factors;
+    size_t crefined = 0;
     if (!s->linked) {
-        if ((st = hier_link_initial(s, err)) != RP_OK)
-            return st;
-        s->linked = 1;
-        hier_log(s, "hierarchical: %zu faces, %zu initial links", s->nfaces, s->nlinks);
-    }
+        if (s->clustering) {
+            if ((st = hier_cluster_refine(s, &crefined, err)) != RP_OK)
+                return st;
+            s->linked = 1;
+            hier_log(s,
+                     "hierarchical: %zu faces, %zu clusters; initial links from the root cluster: %zu "
+                     "face links, %zu cluster links (%.3g face pairs)",
+                     s->nfaces, s->ncl, s->links_initial, s->clinks_initial,
+                     (double)s->nfaces * (double)(s->nfaces - 1));
+        } else {
+            if ((st = hier_link_initial(s, err)) != RP_OK)
+                return st;
+            s->linked = 1;
+            s->links_initial = s->nlinks;
+            hier_log(s, "hierarchical: %zu faces, %zu initial links", s->nfaces, s->nlinks);
+        }
+    } else if ((st = hier_cluster_refine(s, &crefined, err)) != RP_OK)
+        return st;
     size_t refined = 0;
     if ((st = hier_refine(s, &refined, err)) != RP_OK)
         return st;
+    refined += crefined;
     if ((st = update_scale(s, err)) != RP_OK)
         return st;
+    hier_cluster_gather(s);
     s->residual = hier_sweep(s);
     s->iterations++;
     info->rays = s->rays - rays0;
@@ -533,9 +599,11 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
         hier_log(s,
                  "hierarchical: %lu sweeps, %lu refinement passes; %zu leaves (%zu nodes), "
                  "equivalent uniform mesh %.0f elements; links %zu (%zu fully visible, %zu partial, "
-                 "%zu invisible not stored, %zu refined); %.3g visibility rays; %.1f MiB",
+                 "%zu invisible not stored, %zu refined); %zu clusters, %zu cluster links (%zu refined, "
+                 "%zu culled); %.3g visibility rays; %.1f MiB",
                  h.iterations, h.refine_passes, h.leaves, h.nodes, h.uniform_equivalent, h.links,
-                 h.links_full, h.links_partial, h.links_invisible, h.links_refined, h.rays,
+                 h.links_full, h.links_partial, h.links_invisible, h.links_refined, h.clusters,
+                 h.cluster_links, h.cluster_links_refined, h.cluster_links_culled, h.rays,
                  (double)h.bytes / (1 << 20));
     }
     return RP_OK;

@@ -34,6 +34,12 @@ typedef struct rp_hier_stats {
     double residual;          /* relative energy change of the last sweep */
     double rays;              /* visibility rays cast so far */
     size_t bytes;             /* memory held: nodes, radiosities, links */
+    /* Clustering (Smits, Arvo & Greenberg 1994), 0 when it is off. */
+    size_t clusters;          /* clusters above the face roots */
+    size_t cluster_links;     /* links stored with a cluster at one end or both */
+    size_t cluster_links_refined; /* cluster links replaced by finer ones so far */
+    size_t cluster_links_culled;  /* dropped: normal cones show nothing can pass */
+    size_t initial_links;     /* face plus cluster links after the first linking */
 } rp_hier_stats;
 
 void rp_hierarchical_stats(const void *state, rp_hier_stats *out);
