@@ -41,6 +41,11 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
 /* An extra option's value or NULL. */
 const char *rp_cli_extra(const rp_cli *cli, const char *name);
 
+/* Routes SIGINT and SIGTERM to handler (which should only set a flag the
+ * run loop polls), so long runs stop at the next step and write what they
+ * have. */
+void rp_cli_catch_signals(void (*handler)(int));
+
 /* 0 when the directory a file is to be written into (path's parent) exists
  * and is writable; otherwise prints "radpt COMMAND: OPTION PATH: ..." and
  * returns 2, so a long run is refused before it starts, not after. */

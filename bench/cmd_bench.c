@@ -169,14 +169,8 @@ int rp_cmd_reference(int argc, char **argv)
         free(av);
         return rc;
     }
-    if (rp_cli_extra(&cli, "checkpoint")) {
-        struct sigaction sa;
-        memset(&sa, 0, sizeof sa);
-        sa.sa_handler = on_reference_signal;
-        sigemptyset(&sa.sa_mask);
-        sigaction(SIGINT, &sa, NULL);
-        sigaction(SIGTERM, &sa, NULL);
-    }
+    if (rp_cli_extra(&cli, "checkpoint"))
+        rp_cli_catch_signals(on_reference_signal);
     front fr = {0};
     rp_reference_params rp = {.size = sizeof rp, .spp = spp, .samples = samples,
                               .seed = seed_given(ac, av) ? cli.seed : 0, .threads = cli.threads,

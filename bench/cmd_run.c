@@ -27,16 +27,6 @@ static void on_signal(int sig)
     interrupted = 1;
 }
 
-static void catch_signals(void)
-{
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-}
-
 typedef struct run_totals {
     rp_step_info sum;   /* rays, paths, form factors, iterations added up */
     rp_step_info last;  /* the last step's residual, unshot, progress */
@@ -78,7 +68,7 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
 {
     rp_progress bar;
     rp_progress_begin(&bar, label);
-    catch_signals();
+    rp_cli_catch_signals(on_signal);
     const double seconds0 = tot->seconds;
     double t0 = rp_clock(), excluded = 0, last_ckpt = t0;
     if (ck && ck->converged) {

@@ -435,45 +435,42 @@ int rp_ray_occluded(const rp_raycast *rc, rp_vec3 a, rp_vec3 na, rp_vec3 b, rp_v
     return ray.tfar < 0.0f;
 }
 
+/* n rays through rtcIntersect1M in blocks of RP_RAYCAST_STREAM; the
+ * origin of ray i is o[i * o_stride] (stride 0: one origin for all). */
+static void rp_ray_stream(const rp_raycast *rc, size_t n, const rp_vec3 *o, size_t o_stride, const rp_vec3 *d,
+                          double tmax, enum RTCIntersectContextFlags flags, rp_hit *hits,
+                          unsigned char *hit_mask)
+{
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = flags;
+    struct RTCRayHit rh[RP_RAYCAST_STREAM];
+    rp_vec3 du[RP_RAYCAST_STREAM];
+    for (size_t start = 0; start < n; start += RP_RAYCAST_STREAM) {
+        size_t m = n - start < RP_RAYCAST_STREAM ? n - start : RP_RAYCAST_STREAM;
+        for (size_t i = 0; i < m; i++) {
+            du[i] = rp_v3_normalize(d[start + i]);
+            rp_rayhit_init(rc, &rh[i], o[(start + i) * o_stride], du[i], tmax);
+        }
+        rtcIntersect1M(rc->rtc, &ctx, rh, (unsigned)m, sizeof rh[0]);
+        for (size_t i = 0; i < m; i++) {
+            rp_vec3 oi = o[(start + i) * o_stride];
+            hit_mask[start + i] = (unsigned char)rp_hit_fill(rc, &rh[i], oi, oi, du[i], &hits[start + i]);
+        }
+    }
+}
+
 void rp_ray_closest_coherent(const rp_raycast *rc, size_t n, rp_vec3 o, const rp_vec3 *d, rp_hit *hits,
                              unsigned char *hit_mask)
 {
     /* Rays from one point through neighbouring pixels: Embree may trace
      * them as packets (RTC_INTERSECT_CONTEXT_FLAG_COHERENT, Embree 3 manual,
      * rtcIntersect1M). */
-    struct RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-    struct RTCRayHit rh[RP_RAYCAST_STREAM];
-    rp_vec3 du[RP_RAYCAST_STREAM];
-    for (size_t start = 0; start < n; start += RP_RAYCAST_STREAM) {
-        size_t m = n - start < RP_RAYCAST_STREAM ? n - start : RP_RAYCAST_STREAM;
-        for (size_t i = 0; i < m; i++) {
-            du[i] = rp_v3_normalize(d[start + i]);
-            rp_rayhit_init(rc, &rh[i], o, du[i], INFINITY);
-        }
-        rtcIntersect1M(rc->rtc, &ctx, rh, (unsigned)m, sizeof rh[0]);
-        for (size_t i = 0; i < m; i++)
-            hit_mask[start + i] = (unsigned char)rp_hit_fill(rc, &rh[i], o, o, du[i], &hits[start + i]);
-    }
+    rp_ray_stream(rc, n, &o, 0, d, INFINITY, RTC_INTERSECT_CONTEXT_FLAG_COHERENT, hits, hit_mask);
 }
 
 void rp_ray_closest_n(const rp_raycast *rc, size_t n, const rp_vec3 *o, const rp_vec3 *d,
                       double tmax, rp_hit *hits, unsigned char *hit_mask)
 {
-    struct RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    struct RTCRayHit rh[RP_RAYCAST_STREAM];
-    rp_vec3 du[RP_RAYCAST_STREAM];
-    for (size_t start = 0; start < n; start += RP_RAYCAST_STREAM) {
-        size_t m = n - start < RP_RAYCAST_STREAM ? n - start : RP_RAYCAST_STREAM;
-        for (size_t i = 0; i < m; i++) {
-            du[i] = rp_v3_normalize(d[start + i]);
-            rp_rayhit_init(rc, &rh[i], o[start + i], du[i], tmax);
-        }
-        rtcIntersect1M(rc->rtc, &ctx, rh, (unsigned)m, sizeof rh[0]);
-        for (size_t i = 0; i < m; i++)
-            hit_mask[start + i] = (unsigned char)rp_hit_fill(rc, &rh[i], o[start + i],
-                                                             o[start + i], du[i], &hits[start + i]);
-    }
+    rp_ray_stream(rc, n, o, 1, d, tmax, RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT, hits, hit_mask);
 }

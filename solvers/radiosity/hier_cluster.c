@@ -520,21 +520,6 @@ static void orient(const hier_state *s, hier_clink *l)
 
 /* ---- refinement ---- */
 
-static int grow(void **a, size_t *cap, size_t need, size_t size)
-{
-    if (need <= *cap)
-        return 1;
-    size_t c = *cap ? *cap : 1024;
-    while (c < need)
-        c *= 2;
-    void *p = realloc(*a, c * size);
-    if (!p)
-        return 0;
-    *a = p;
-    *cap = c;
-    return 1;
-}
-
 /* Cluster-link form-factor sums: per node, of the links it receives
  * (cl_nff), and per face root, of those its clusters receive (cl_ff);
  * and which nodes some cluster link reaches. */
@@ -605,7 +590,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     size_t nw = 0, nk = 0, nfl = 0;
     int first = s->nclinks == 0 && !s->linked;
     if (first) {
-        if (!grow((void **)&work, &capw, 1, sizeof *work))
+        if (!hier_grow((void **)&work, &capw, 1, sizeof *work))
             goto nomem;
         work[0].recv = work[0].src = HIER_CL_BIT; /* the root cluster */
         work[0].F = 0;
@@ -623,7 +608,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     }
     int changed = first;
     while (nw) {
-        if (!grow((void **)&act, &capa, nw, 1))
+        if (!hier_grow((void **)&act, &capa, nw, 1))
             goto nomem;
 #pragma omp parallel for num_threads(s->threads) schedule(static) if (nw > 8192)
         for (long k = 0; k < (long)nw; k++)
@@ -634,7 +619,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
         for (size_t k = 0; k < nw; k++) {
             const hier_clink l = work[k];
             if (act[k] == 0) {
-                if (!grow((void **)&kept, &capk, nk + 1, sizeof *kept))
+                if (!hier_grow((void **)&kept, &capk, nk + 1, sizeof *kept))
                     goto nomem;
                 kept[nk++] = l;
                 continue;
@@ -670,7 +655,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                 else
                     nsrc = m;
             }
-            if (!grow((void **)&pairs, &capp, 2 * (np + 16), sizeof *pairs))
+            if (!hier_grow((void **)&pairs, &capp, 2 * (np + 16), sizeof *pairs))
                 goto nomem;
             for (int i = 0; i < nr; i++)
                 for (int j = 0; j < nsrc; j++) {
@@ -684,9 +669,9 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
         /* Form factors of the new links, in parallel, into their slots:
          * code 0 none, 1 face link, 2 face link with every ray blocked,
          * 3 cluster link. */
-        if (!grow((void **)&cand, &capc, np ? np : 1, sizeof *cand) ||
-            !grow((void **)&fcand, &capfc, np ? np : 1, sizeof *fcand) ||
-            !grow((void **)&code, &capcode, np ? np : 1, 1))
+        if (!hier_grow((void **)&cand, &capc, np ? np : 1, sizeof *cand) ||
+            !hier_grow((void **)&fcand, &capfc, np ? np : 1, sizeof *fcand) ||
+            !hier_grow((void **)&code, &capcode, np ? np : 1, 1))
             goto nomem;
         double rays = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64) reduction(+ : rays) if (np > 256)
@@ -726,7 +711,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                 cand[nn++] = cand[t];
                 continue;
             }
-            if (!grow((void **)&flinks, &capfl, nfl + 1, sizeof *flinks))
+            if (!hier_grow((void **)&flinks, &capfl, nfl + 1, sizeof *flinks))
                 goto nomem;
             flinks[nfl++] = fcand[t];
         }

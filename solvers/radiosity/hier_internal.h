@@ -311,4 +311,8 @@ static inline double hier_u01(uint64_t key, uint64_t d)
     return (double)(hier_mix(key + (d + 1) * UINT64_C(0x9e3779b97f4a7c15)) >> 11) * 0x1.0p-53;
 }
 
+/* Growable scratch arrays: room for need items of size bytes in *a
+ * (capacity *cap, doubling from 1024); 0 when out of memory. */
+int hier_grow(void **a, size_t *cap, size_t need, size_t size);
+
 #endif

@@ -485,8 +485,9 @@ static int near_pair(const hier_state *s, const hier_link *l)
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * q->area;
 }
 
-/* Growable scratch arrays of hier_refine. */
-static int grow(void **a, size_t *cap, size_t need, size_t size)
+/* Growable scratch arrays (hier_refine, hier_cluster.c): room for need
+ * items of size bytes in *a, doubling from 1024; 0 when out of memory. */
+int hier_grow(void **a, size_t *cap, size_t need, size_t size)
 {
     if (need <= *cap)
         return 1;
@@ -543,7 +544,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     /* Round 0 judged the stored links, later rounds the fresh ones. */
     for (int round = 0;; round++) {
         size_t capm0 = capm;
-        if (!grow((void **)&mark, &capm, s->nnodes, 1))
+        if (!hier_grow((void **)&mark, &capm, s->nnodes, 1))
             goto nomem;
         memset(mark + capm0, 0, capm - capm0);
         size_t ns = 0;
@@ -551,8 +552,8 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
          * depend on threads. */
 #define ADD_SPLIT(L, MODE)                                                         \
     do {                                                                           \
-        if (!grow((void **)&splitl, &caps, ns + 1, sizeof *splitl) ||              \
-            !grow((void **)&smode, &capsm, ns + 1, 1))                             \
+        if (!hier_grow((void **)&splitl, &caps, ns + 1, sizeof *splitl) ||              \
+            !hier_grow((void **)&smode, &capsm, ns + 1, 1))                             \
             goto nomem;                                                            \
         splitl[ns] = (L);                                                          \
         smode[ns] = (unsigned char)(MODE);                                         \
@@ -581,7 +582,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
         } else {
             if (nfresh == 0)
                 break;
-            if (!grow((void **)&fact, &capfa, nfresh, 1) || !grow((void **)&kdead, &capkd, nkept + nfresh, 1))
+            if (!hier_grow((void **)&fact, &capfa, nfresh, 1) || !hier_grow((void **)&kdead, &capkd, nkept + nfresh, 1))
                 goto nomem;
             size_t nsp = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsp) if (nfresh > 8192)
@@ -632,7 +633,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             }
             /* What this round keeps joins the kept list; an invisible link
              * the oracle would not refine is dropped. */
-            if (!grow((void **)&kept, &capk, nkept + nfresh, sizeof *kept))
+            if (!hier_grow((void **)&kept, &capk, nkept + nfresh, sizeof *kept))
                 goto nomem;
             for (size_t k = 0; k < nfresh; k++) {
                 if (fact[k])
@@ -655,7 +656,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
         }
         *refined += ns;
         s->links_refined += ns;
-        if (!grow((void **)&cand, &capc, ns * 4, sizeof *cand) || !grow((void **)&code, &capcode, ns * 4, 1))
+        if (!hier_grow((void **)&cand, &capc, ns * 4, sizeof *cand) || !hier_grow((void **)&code, &capcode, ns * 4, 1))
             goto nomem;
         double rays = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (ns > 64)
@@ -670,7 +671,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             code[t] = (unsigned char)hier_link_eval(s, qi, pi, &cand[t], &rays);
         }
         s->rays += rays;
-        if (!grow((void **)&fresh, &capf, ns * 4, sizeof *fresh))
+        if (!hier_grow((void **)&fresh, &capf, ns * 4, sizeof *fresh))
             goto nomem;
         for (size_t t = 0; t < ns * 4; t++) {
             if (code[t] == 0)
