@@ -76,6 +76,26 @@ static void in_dir(char *buf, size_t n, const char *name) { snprintf(buf, n, "%s
 
 /* Every channel of two EXR files bit for bit (metadata such as seconds
  * differs between runs and is not compared). */
+/* Waits (at most 30 s) for the child's first checkpoint, interrupts it
+ * with SIGINT and returns its exit status; asserts it stopped by itself. */
+static int interrupt_after_checkpoint(pid_t pid, const char *ckpt)
+{
+    int seen = 0;
+    for (int i = 0; i < 30000 && !seen; i++) {
+        seen = access(ckpt, F_OK) == 0;
+        if (!seen) {
+            struct timespec ts = {0, 1000000};
+            nanosleep(&ts, NULL);
+        }
+    }
+    kill(pid, SIGINT);
+    int status = 0;
+    cr_assert_eq(waitpid(pid, &status, 0), pid);
+    cr_assert(seen, "no checkpoint appeared");
+    cr_assert(WIFEXITED(status), "killed by a signal rather than stopped");
+    return status;
+}
+
 /* Returns the number of values that differ (expected 0 when same is set). */
 static size_t compare_channels(const char *a, const char *b, size_t channels, int same)
 {
@@ -202,20 +222,7 @@ Test(checkpoint, interrupted_render_resumes_bit_identical)
               "--checkpoint", ckpt, "--checkpoint-every", "0", "-o", out, (char *)NULL);
         _exit(127);
     }
-    /* wait for the first checkpoint (at most 30 s), then interrupt */
-    int seen = 0;
-    for (int i = 0; i < 30000 && !seen; i++) {
-        seen = access(ckpt, F_OK) == 0;
-        if (!seen) {
-            struct timespec ts = {0, 1000000};
-            nanosleep(&ts, NULL);
-        }
-    }
-    kill(pid, SIGINT);
-    int status = 0;
-    cr_assert_eq(waitpid(pid, &status, 0), pid);
-    cr_assert(seen, "no checkpoint appeared");
-    cr_assert(WIFEXITED(status), "killed by a signal rather than stopped");
+    int status = interrupt_after_checkpoint(pid, ckpt);
     cr_expect_eq(WEXITSTATUS(status), 1, "an interrupted render exits 1");
     char *flag = rp_image_read_exr_attr(out, "radpt:interrupted");
     cr_expect(flag && strcmp(flag, "yes") == 0, "interrupted image written");
@@ -366,19 +373,7 @@ Test(checkpoint, interrupted_reference_resumes_bit_identical)
               "--checkpoint", ckpt, "--checkpoint-every", "1e-6", (char *)NULL);
         _exit(127);
     }
-    int seen = 0;
-    for (int i = 0; i < 30000 && !seen; i++) {
-        seen = access(ckpt, F_OK) == 0;
-        if (!seen) {
-            struct timespec ts = {0, 1000000};
-            nanosleep(&ts, NULL);
-        }
-    }
-    kill(pid, SIGINT);
-    int status = 0;
-    cr_assert_eq(waitpid(pid, &status, 0), pid);
-    cr_assert(seen, "no checkpoint appeared");
-    cr_assert(WIFEXITED(status), "killed by a signal rather than stopped");
+    int status = interrupt_after_checkpoint(pid, ckpt);
     cr_expect_eq(WEXITSTATUS(status), 1, "an interrupted reference exits 1");
 
     double n = header_number(ckpt, "iterations");
