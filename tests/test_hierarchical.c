@@ -350,8 +350,10 @@ Test(hier, gouraud_is_crack_free, .init = hsetup, .timeout = 300)
     size_t tcount = hier_vertices_tcount(hv);
     cr_assert_gt(tcount, 0, "no T-vertex: the test would prove nothing");
     const size_t nb = s->nb;
-    double Bp[HIER_MAX_BANDS], Bm[HIER_MAX_BANDS], worst = 0;
+    double Bp[HIER_MAX_BANDS], Bm[HIER_MAX_BANDS], worst = 0, Bmax = 0;
     size_t checked = 0;
+    for (size_t i = 0; i < s->nnodes * nb; i++)
+        Bmax = fmax(Bmax, s->B[i]);
     for (size_t i = 0; i < s->nnodes; i++) {
         const hier_node *nd = &s->nodes[i];
         if (nd->child != RP_NONE)
@@ -380,10 +382,15 @@ Test(hier, gouraud_is_crack_free, .init = hsetup, .timeout = 300)
                 continue;
             hier_vertices_eval(s, hv, nd->face, xp, Bp);
             hier_vertices_eval(s, hv, nd->face, xm, Bm);
-            double scale = 0;
+            /* Relative, down to 1e-4 of the brightest leaf: on the floor
+             * under a box, which no light reaches, vertex values are 0 to
+             * rounding, and the points 1e-9 of an edge away from the edge
+             * pick up 1e-9 of the lit corners across their leaves. */
+            double scale = 1e-4 * Bmax;
             for (size_t bnd = 0; bnd < nb; bnd++) {
                 scale = fmax(scale, fabs(Bp[bnd]) + fabs(Bm[bnd]));
-                worst = fmax(worst, fabs(Bp[bnd] - Bm[bnd]) / (scale > 0 ? scale : 1));
+                worst = fmax(worst, fabs(Bp[bnd] - Bm[bnd]) / scale);
+
             }
             checked++;
         }
@@ -392,6 +399,84 @@ Test(hier, gouraud_is_crack_free, .init = hsetup, .timeout = 300)
                 tcount, checked, worst);
     cr_assert_gt(checked, 100);
     cr_assert_lt(worst, 1e-6, "a crack: radiosity jumps by %.3g across a leaf edge", worst);
+    hier_vertices_destroy(hv);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
+/* Gouraud vertex values are the radiosity at the vertex, not the mean of
+ * the leaves around it.  A unit-square receiver (rho 1/2) under a parallel
+ * unit-square emitter at height 1, never refined (one leaf, four corner
+ * vertices): its radiosity at a point p is rho pi Le F(p), with F the
+ * point-to-rectangle form factor by superposition of Howell's B-3 corner
+ * rectangles.  The vertex is evaluated a thousandth of the way towards the
+ * leaf's centre (hier_image.c), so the closed form is taken there too.  A
+ * leaf-mean value would be off by 30% at the corners. */
+Test(hier, gouraud_vertices_are_point_values, .init = hsetup)
+{
+    rp_scene *scene = rp_test_parse("bands grey\n"
+                                    "material floor reflect 0.5\n"
+                                    "material lamp reflect 0 emit 3\n"
+                                    "quad receiver floor  0 0 0  1 0 0  1 1 0  0 1 0\n"
+                                    "quad emitter lamp  0 0 1  0 1 1  1 1 1  1 0 1\n");
+    hrun r;
+    const char *kv[] = {"bf-epsilon", "1e6", NULL};
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    const hier_state *s = r.state;
+    rp_error err = {""};
+    hier_vertices *hv = NULL;
+    cr_assert_eq(hier_vertices_create(s, &hv, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(s->nodes[0].child, RP_NONE, "the receiver was refined");
+    double leaf = s->B[0];
+    const double corner[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+    for (int k = 0; k < 4; k++) {
+        /* By symmetry each corner sees the emitter as (0, 0) does. */
+        double e = 0.5e-3, f = 1 - e;
+        double F = corner_rect(f, f, 1) + 2 * corner_rect(e, f, 1) + corner_rect(e, e, 1);
+        double want = 0.5 * RP_PI * 3 * F;
+        rp_vec3 x = rp_v3(corner[k][0] + (corner[k][0] > 0 ? -e : e), corner[k][1] + (corner[k][1] > 0 ? -e : e), 0);
+        double B;
+        hier_vertices_eval(s, hv, 0, x, &B);
+        cr_log_info("receiver corner %d: vertex B %.9f, closed form %.9f, leaf mean %.6f", k, B, want, leaf);
+        cr_assert_float_eq(B, want, 1e-9 * want, "corner %d: %.12g vs %.12g", k, B, want);
+        cr_assert_gt(fabs(leaf - want), 0.2 * want, "the leaf mean is close: the test would prove nothing");
+    }
+    hier_vertices_destroy(hv);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
+/* In the refined furnace every vertex value is Le / (1 - rho) = 2 too: the
+ * point form factors are renormalised as the leaves' rows are. */
+Test(hier, gouraud_furnace, .init = hsetup, .timeout = 120)
+{
+    rp_scene *scene = rp_test_load("scenes/furnace.scene");
+    hrun r;
+    const char *kv[] = {"bf-epsilon", "0.05", "tolerance", "1e-12", NULL};
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    const hier_state *s = r.state;
+    rp_error err = {""};
+    hier_vertices *hv = NULL;
+    cr_assert_eq(hier_vertices_create(s, &hv, &err), RP_OK, "%s", err.message);
+    double worst = 0;
+    size_t n = 0;
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        if (nd->child != RP_NONE)
+            continue;
+        for (int k = 0; k < nd->nverts; k++) {
+            /* Just inside the leaf, next to each corner. */
+            rp_vec3 x = rp_v3_madd(nd->v[k], rp_v3_sub(nd->c, nd->v[k]), 1e-6);
+            double B[HIER_MAX_BANDS];
+            hier_vertices_eval(s, hv, nd->face, x, B);
+            for (size_t b = 0; b < s->nb; b++)
+                worst = fmax(worst, fabs(B[b] / RP_PI - 2));
+            n++;
+        }
+    }
+    cr_log_info("furnace, bf-epsilon 0.05: %zu leaf corners, largest |L - 2| %.3g", n, worst);
+    cr_assert_gt(n, 100);
+    cr_assert_lt(worst, 1e-6);
     hier_vertices_destroy(hv);
     hrun_end(&r);
     rp_scene_destroy(scene);

@@ -11,13 +11,16 @@
  *
  *   flat     the leaf's own value;
  *   gouraud  interpolated from values at the leaves' corners (Cohen &
- *            Wallace 1993, sec. 9.2): at an ordinary vertex the
- *            area-weighted mean of the leaves (of the same surface) that
- *            have it as a corner; at a T-vertex (one lying inside an edge of
- *            a coarser neighbouring leaf) the value is anchored, i.e.
- *            interpolated along that coarser edge (Baum, Mann, Smith &
- *            Winget 1991), so both sides of the edge interpolate the same
- *            line and the image has no shading cracks;
+ *            Wallace 1993, sec. 9.2): at an ordinary vertex the radiosity
+ *            at that point, gathered through the links of the leaves around
+ *            it with point-to-polygon form factors (point_radiosity below;
+ *            the mean of leaf values would smear every gradient by half a
+ *            leaf and every link's irradiance into a constant); at a
+ *            T-vertex (one lying inside an edge of a coarser neighbouring
+ *            leaf) the value is anchored, i.e. interpolated along that
+ *            coarser edge (Baum, Mann, Smith & Winget 1991), so both sides
+ *            of the edge interpolate the same line and the image has no
+ *            shading cracks;
  *   gather   one bounce of final gathering (Reichert 1992): L = Le +
  *            rho/pi E(x), the irradiance E from cosine-distributed rays that
  *            each see the flat value of the leaf they hit.
@@ -63,7 +66,8 @@ typedef struct vtx_table {
     size_t n, cap;       /* vertices */
     rp_vec3 *p;
     uint32_t *surface;
-    double *acc;         /* n x nb: sum of A B over leaves with this corner */
+    double *acc;         /* n x nb: sum over the leaves with this corner of
+                            A x (radiosity there through that leaf's links) */
     double *area;
     uint32_t *ta, *tb;   /* anchor edge of a T-vertex, RP_NONE otherwise */
     double *tlen;        /* squared length of that edge */
@@ -195,7 +199,8 @@ static const double *vtx_value(vtx_table *t, uint32_t id)
         return v;
     if (t->state[id] == 1 || t->ta[id] == RP_NONE) {
         /* Ordinary vertex (or a cycle, which the anchoring by the longest
-         * edge rules out): the area-weighted mean of its leaves. */
+         * edge rules out): the area-weighted mean of its leaves' values
+         * (vtx_point_values). */
         for (size_t b = 0; b < nb; b++)
             v[b] = t->area[id] > 0 ? t->acc[(size_t)id * nb + b] / t->area[id] : 0;
         t->state[id] = 2;
@@ -215,7 +220,160 @@ struct hier_vertices {
     uint32_t *leafpos; /* nnodes: the leaf's number, RP_NONE for inner nodes */
     uint32_t *lv;      /* leaves x 4: vertex of each corner */
     size_t tcount;     /* T-vertices */
+    double rays;       /* visibility rays cast for the vertex values */
 };
+
+/* The source's radiosity as the gather saw it (hierarchical.c,
+ * source_radiosity): the kernel-weighted children where the shares are
+ * known, else the node's own mean. */
+static void link_source(const hier_state *s, const hier_link *l, double *out)
+{
+    const size_t nb = s->nb;
+    const hier_node *p = &s->nodes[l->src];
+    if (p->child == RP_NONE || !(l->frac[0] >= 0)) {
+        memcpy(out, s->B + (size_t)l->src * nb, nb * sizeof *out);
+        return;
+    }
+    double fs = (double)l->frac[0] + l->frac[1] + l->frac[2] + l->frac[3];
+    for (size_t b = 0; b < nb; b++)
+        out[b] = 0;
+    for (int k = 0; k < 4; k++)
+        for (size_t b = 0; b < nb; b++)
+            out[b] += l->frac[k] * s->B[(size_t)(p->child + k) * nb + b] / fs;
+}
+
+/* The visible fraction of source p seen from x (normal n): m x m jittered
+ * strata on p, each weighted by the kernel cos cos / r^2, as hier_link.c
+ * weighs a link's rays. */
+static double point_visibility(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p,
+                               uint64_t key, double *rays)
+{
+    const rp_vec3 np = s->faces[p->face].n;
+    unsigned m = (unsigned)floor(sqrt((double)s->vertex_rays) + 0.5);
+    double wsum = 0, wopen = 0;
+    for (unsigned k = 0; k < m * m; k++) {
+        double u1 = ((k % m) + hier_u01(key, 2 * (uint64_t)k)) / m;
+        double u2 = ((k / m) + hier_u01(key, 2 * (uint64_t)k + 1)) / m;
+        rp_vec3 b = hier_node_point(p, u1, u2), d = rp_v3_sub(b, x);
+        double r2 = rp_v3_dot(d, d);
+        double w = hier_max(rp_v3_dot(d, n), 0) * hier_max(-rp_v3_dot(d, np), 0) / (r2 * r2);
+        if (!(w > 0))
+            continue;
+        wsum += w;
+        *rays += 1;
+        if (!rp_ray_occluded(s->rc, x, n, b, np))
+            wopen += w;
+    }
+    return wsum > 0 ? wopen / wsum : 0;
+}
+
+/* Radiosity at point x of leaf i (Wallace, Elmquist & Haines 1989: vertex
+ * radiosities from point-to-area form factors).  The leaf's own value has
+ * each link's form factor as estimated for its receiver (the leaf or an
+ * ancestor, at that node's centre) and, pushed down, is constant over the
+ * leaf:
+ *
+ *     B_i = pi Le + s_i (rho sum_links F_l B_l + C),
+ *
+ * C what clusters above hand down, s_i the enclosure's row-sum scale
+ * (hierarchical.c).  At x each unoccluded link's form factor is replaced
+ * by the exact point-to-polygon one, F_l(x), and s by 1 / (sum F_l(x) +
+ * the rest of the leaf's row sum), so the light keeps the shape of the
+ * kernel (the ramp of direct light under the ceiling, the fall into a
+ * corner) below the size of the links.  Links whose visibility rays were
+ * partly blocked, or whose elements cross each other's planes, keep their
+ * constant estimate: their visible fraction is known only as a mean. */
+static void point_radiosity(const hier_state *s, uint32_t i, rp_vec3 x, uint64_t key, double *rays,
+                            double *out)
+{
+    const size_t nb = s->nb;
+    const hier_node *leaf = &s->nodes[i];
+    const hier_face *f = &s->faces[leaf->face];
+    double scale = s->enclosure ? s->ff_scale[i] : 1.0;
+    double gl[HIER_MAX_BANDS], gx[HIER_MAX_BANDS], Bp[HIER_MAX_BANDS];
+    double Fl = 0, Fx = 0;
+    for (size_t b = 0; b < nb; b++)
+        gl[b] = gx[b] = 0;
+    for (uint32_t a = i; a != RP_NONE; a = s->nodes[a].parent)
+        for (uint32_t k = s->link_start[a]; k < s->link_start[a + 1]; k++) {
+            const hier_link *l = &s->links[k];
+            double F = l->F;
+            Fl += F;
+            if (l->flags & HIER_LINK_PARTIAL)
+                F = hier_point_to_node(s, x, f->n, &s->nodes[l->src], 1) *
+                    point_visibility(s, x, f->n, &s->nodes[l->src], hier_key(key, k, 0), rays);
+            else
+                F = hier_point_to_node(s, x, f->n, &s->nodes[l->src], 1);
+            Fx += F;
+            link_source(s, l, Bp);
+            for (size_t b = 0; b < nb; b++) {
+                gl[b] += l->F * Bp[b];
+                gx[b] += F * Bp[b];
+            }
+        }
+    double sx = scale;
+    if (s->enclosure) {
+        double rest = 1.0 / scale - Fl; /* cluster links' form factors */
+        sx = Fx + rest > 0 ? 1.0 / (Fx + rest) : scale;
+    }
+    for (size_t b = 0; b < nb; b++) {
+        double Bi = s->B[(size_t)i * nb + b], E = RP_PI * f->Le[b];
+        /* What the leaf gathered apart from its links: clusters above. */
+        double C = (Bi - E) / scale - f->rho[b] * gl[b];
+        out[b] = hier_max(0.0, E + sx * (f->rho[b] * gx[b] + C));
+    }
+}
+
+/* Values at ordinary vertices: the area-weighted mean, over the leaves
+ * around the vertex, of point_radiosity at the vertex through each leaf's
+ * links (moved a thousandth of the way towards the leaf's centre, off the
+ * edges where the contour integral is singular).  T-vertices then
+ * interpolate their anchors. */
+static int vtx_point_values(const hier_state *s, hier_vertices *hv, size_t nleaves)
+{
+    vtx_table *t = &hv->t;
+    const size_t nb = t->nb;
+    double *pv = malloc((nleaves ? nleaves : 1) * 4 * nb * sizeof *pv);
+    uint32_t *leaf = malloc((nleaves ? nleaves : 1) * sizeof *leaf);
+    if (!pv || !leaf) {
+        free(pv);
+        free(leaf);
+        return 0;
+    }
+    for (size_t i = 0; i < s->nnodes; i++)
+        if (hv->leafpos[i] != RP_NONE)
+            leaf[hv->leafpos[i]] = (uint32_t)i;
+    double nrays = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64) reduction(+ : nrays)
+    for (long j = 0; j < (long)nleaves; j++) {
+        const hier_node *nd = &s->nodes[leaf[j]];
+        const uint32_t *c = hv->lv + (size_t)j * 4;
+        for (int k = 0; k < nd->nverts; k++) {
+            if (t->ta[c[k]] != RP_NONE)
+                continue;
+            rp_vec3 x = rp_v3_madd(t->p[c[k]], rp_v3_sub(nd->c, t->p[c[k]]), 1e-3);
+            point_radiosity(s, leaf[j], x, hier_key(s->seed ^ UINT64_C(0x7674), leaf[j], (uint64_t)k), &nrays,
+                            pv + ((size_t)j * 4 + k) * nb);
+        }
+    }
+    for (size_t v = 0; v < t->n; v++)
+        for (size_t b = 0; b < nb; b++)
+            t->acc[v * nb + b] = 0;
+    for (size_t j = 0; j < nleaves; j++) {
+        const hier_node *nd = &s->nodes[leaf[j]];
+        const uint32_t *c = hv->lv + j * 4;
+        for (int k = 0; k < nd->nverts; k++)
+            if (t->ta[c[k]] == RP_NONE)
+                for (size_t b = 0; b < nb; b++)
+                    t->acc[(size_t)c[k] * nb + b] += nd->area * pv[(j * 4 + k) * nb + b];
+    }
+    for (size_t v = 0; v < t->n; v++)
+        vtx_value(t, (uint32_t)v);
+    hv->rays = nrays;
+    free(pv);
+    free(leaf);
+    return 1;
+}
 
 void hier_vertices_destroy(hier_vertices *v)
 {
@@ -255,8 +413,6 @@ rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_erro
         for (int k = 0; k < nd->nverts; k++) {
             c[k] = vtx_insert(t, sf, nd->v[k]);
             t->area[c[k]] += nd->area;
-            for (size_t b = 0; b < nb; b++)
-                t->acc[(size_t)c[k] * nb + b] += nd->area * s->B[i * nb + b];
         }
     }
     for (size_t i = 0; i < s->nnodes; i++) {
@@ -271,9 +427,11 @@ rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_erro
             vtx_probe(t, sf, a, b, rp_v3_dot(d, d), 0);
         }
     }
-    for (size_t v = 0; v < t->n; v++) {
-        vtx_value(t, (uint32_t)v);
+    for (size_t v = 0; v < t->n; v++)
         hv->tcount += t->ta[v] != RP_NONE;
+    if (!vtx_point_values(s, hv, nleaves)) {
+        hier_vertices_destroy(hv);
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for image vertices");
     }
     *out = hv;
     return RP_OK;
@@ -368,6 +526,7 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
         if ((st = hier_vertices_create(s, &hv, err)) != RP_OK)
             return st;
         job.hv = hv;
+        *rays += hv->rays;
     }
     const rp_recon_shader shader = {shade, &job, s->recon == HIER_RECON_GATHER ? s->gather_rays : 1};
     st = rp_recon_camera(s->scene, s->rc, s->spp, s->seed, s->threads, nb, &shader, out, variance, rays, err);

@@ -202,7 +202,7 @@ typedef struct hier_state {
     unsigned vis_rays;
     unsigned long max_faces;
     hier_recon recon;
-    unsigned spp, gather_rays;
+    unsigned spp, gather_rays, vertex_rays;
 
     /* Progress. */
     int linked;
@@ -238,6 +238,11 @@ void hier_child_centroids(const hier_node *nd, rp_vec3 c[4], double area[4]);
 size_t hier_bytes(const hier_state *s);
 
 /* ---- hier_link.c ---- */
+
+/* The form factor from a point x (unit normal n) on a receiver to source
+ * node p: 0 if x is not in front of p; with far_ok, the disk approximation
+ * far away; else the contour integral. */
+double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, int far_ok);
 
 rp_status hier_cull_init(hier_state *s, rp_error *err);
 /* Links every pair of faces that can see each other. */

@@ -159,9 +159,7 @@ static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_nod
 
 /* ---- form-factor estimates ---- */
 
-/* Point x (normal n) on the receiver to source node p: 0 if x is not in
- * front of p; the disk approximation far away; else the contour integral. */
-static double point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, int far_ok)
+double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, int far_ok)
 {
     const hier_face *fp = &s->faces[p->face];
     if (rp_v3_dot(fp->n, x) - fp->d <= 0)
@@ -209,14 +207,14 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
     const int emitter = !fp->reflects;
     rp_vec3 dc = rp_v3_sub(p->c, q->c);
     if (!straddle && rp_v3_dot(dc, dc) > HIER_NEAR_RATIO * q->area) {
-        F = Fmax = point_to_node(s, q->c, fq->n, p, 1);
+        F = Fmax = hier_point_to_node(s, q->c, fq->n, p, 1);
         if (emitter) {
             /* How much the kernel varies across q, from its four quarters. */
             rp_vec3 cc[4];
             double ca[4];
             hier_child_centroids(q, cc, ca);
             for (int k = 0; k < 4; k++)
-                Fvar = hier_max(Fvar, fabs(point_to_node(s, cc[k], fq->n, p, 1) - F));
+                Fvar = hier_max(Fvar, fabs(hier_point_to_node(s, cc[k], fq->n, p, 1) - F));
         }
     } else {
         /* Near pairs (the kernel varies across q: point estimates at the
@@ -232,7 +230,7 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
         Fmax = 0;
         double fk[4], flo = INFINITY;
         for (int k = 0; k < 4; k++) {
-            fk[k] = point_to_node(s, cc[k], fq->n, p, 0);
+            fk[k] = hier_point_to_node(s, cc[k], fq->n, p, 0);
             F += ca[k] / q->area * fk[k];
             Fmax = hier_max(Fmax, fk[k]);
             flo = hier_min(flo, fk[k]);
@@ -245,7 +243,7 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
              * rather than lost. */
             for (int k = 0; k < q->nverts; k++) {
                 rp_vec3 x = rp_v3_madd(q->v[k], rp_v3_sub(q->c, q->v[k]), 0.01);
-                Fmax = hier_max(Fmax, point_to_node(s, x, fq->n, p, 0));
+                Fmax = hier_max(Fmax, hier_point_to_node(s, x, fq->n, p, 0));
             }
     }
     if (!(F > 0) && !(Fmax > 0))

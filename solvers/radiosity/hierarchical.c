@@ -82,6 +82,10 @@ static const rp_option_spec hier_options[] = {
      "1e-3"},
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
+    {"vertex-rays", "N",
+     "image with --reconstruct gouraud: visibility rays from each vertex to each partly visible "
+     "source it gathers from (rounded to a square, at most 64)",
+     "1"},
     {"spp", "N", "image: camera rays per pixel (stratified, box filter)", "16"},
     {"gather-rays", "N", "image with --reconstruct gather: cosine-distributed rays per camera ray",
      "16"},
@@ -248,7 +252,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->invisible_weight = 0.25;
     s->tolerance = 1e-6;
     s->cl_area_rel = 1e-3;
-    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16;
+    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16, vr = 1;
     s->max_faces = HIER_DEFAULT_MAX_FACES;
     if ((st = rp_options_double(o, "bf-epsilon", 0, 1e6, &s->bf_rel, err)) != RP_OK ||
         (st = rp_options_double(o, "min-area", 1e-15, 1, &s->min_area_rel, err)) != RP_OK ||
@@ -260,6 +264,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         (st = rp_options_uint(o, "max-faces", 1, 1000000000ul, &s->max_faces, err)) != RP_OK ||
         (st = rp_options_uint(o, "spp", 1, 1u << 20, &spp, err)) != RP_OK ||
         (st = rp_options_uint(o, "gather-rays", 1, 1u << 20, &gr, err)) != RP_OK ||
+        (st = rp_options_uint(o, "vertex-rays", 1, 64, &vr, err)) != RP_OK ||
         (st = rp_options_uint(o, "cluster-rays", 1, 256, &crays, err)) != RP_OK ||
         (st = rp_options_double(o, "cluster-area", 0, 1, &s->cl_area_rel, err)) != RP_OK)
         return st;
@@ -281,6 +286,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->max_iterations = maxit;
     s->spp = (unsigned)spp;
     s->gather_rays = (unsigned)gr;
+    s->vertex_rays = (unsigned)vr;
     s->recon = HIER_RECON_GOURAUD;
     const char *rm = rp_options_get(o, "reconstruct");
     if (rm) {
