@@ -244,27 +244,36 @@ static void link_source(const hier_state *s, const hier_link *l, double *out)
 
 /* The visible fraction of source p seen from x (normal n): m x m jittered
  * strata on p, each weighted by the kernel cos cos / r^2, as hier_link.c
- * weighs a link's rays. */
+ * weighs a link's rays.  Points of p behind x's tangent plane (or seeing
+ * x from behind) carry no kernel: further uniform points replace them, up
+ * to 8 m^2 tries, so that a source the plane cuts through (the floor seen
+ * from the foot of a box) is not taken as hidden; with no valid point at
+ * all, what x sees of p is negligible and it counts as visible. */
 static double point_visibility(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p,
                                uint64_t key, double *rays)
 {
     const rp_vec3 np = s->faces[p->face].n;
-    unsigned m = (unsigned)floor(sqrt((double)s->vertex_rays) + 0.5);
+    const unsigned m = (unsigned)floor(sqrt((double)s->vertex_rays) + 0.5), N = m * m;
     double wsum = 0, wopen = 0;
-    for (unsigned k = 0; k < m * m; k++) {
-        double u1 = ((k % m) + hier_u01(key, 2 * (uint64_t)k)) / m;
-        double u2 = ((k / m) + hier_u01(key, 2 * (uint64_t)k + 1)) / m;
+    unsigned valid = 0;
+    for (unsigned k = 0; k < 8 * N && valid < N; k++) {
+        double u1 = hier_u01(key, 2 * (uint64_t)k), u2 = hier_u01(key, 2 * (uint64_t)k + 1);
+        if (k < N) {
+            u1 = ((k % m) + u1) / m;
+            u2 = ((k / m) + u2) / m;
+        }
         rp_vec3 b = hier_node_point(p, u1, u2), d = rp_v3_sub(b, x);
         double r2 = rp_v3_dot(d, d);
         double w = hier_max(rp_v3_dot(d, n), 0) * hier_max(-rp_v3_dot(d, np), 0) / (r2 * r2);
         if (!(w > 0))
             continue;
+        valid++;
         wsum += w;
         *rays += 1;
         if (!rp_ray_occluded(s->rc, x, n, b, np))
             wopen += w;
     }
-    return wsum > 0 ? wopen / wsum : 0;
+    return wsum > 0 ? wopen / wsum : 1;
 }
 
 /* Radiosity at point x of leaf i (Wallace, Elmquist & Haines 1989: vertex
