@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ff_internal.h"
 #include "hier_internal.h"
 
 static inline rp_vec3 mid(rp_vec3 a, rp_vec3 b) { return rp_v3_scale(rp_v3_add(a, b), 0.5); }
@@ -194,35 +195,14 @@ rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2)
 
 double hier_point_polygon(rp_vec3 x, rp_vec3 n, const rp_vec3 *poly, int m)
 {
-    /* Sutherland-Hodgman clip to dot(n, y - x) >= 0: the contour formula
-     * holds only for the part of the polygon above x's tangent plane. */
+    /* The contour formula holds only for the part of the polygon above x's
+     * tangent plane: clipped to dot(n, y - x) >= 0 first (formfactor.c's
+     * Sutherland-Hodgman clip and contour sum, with its fast atan2). */
     rp_vec3 r[10];
-    int k = 0;
-    for (int i = 0; i < m; i++) {
-        rp_vec3 a = rp_v3_sub(poly[i], x), b = rp_v3_sub(poly[(i + 1) % m], x);
-        double da = rp_v3_dot(n, a), db = rp_v3_dot(n, b);
-        if (da >= 0)
-            r[k++] = a;
-        if ((da >= 0) != (db >= 0)) {
-            double t = da / (da - db);
-            r[k++] = rp_v3_madd(a, rp_v3_sub(b, a), t);
-        }
-    }
+    uint32_t k = rp_ff_clip(poly, (uint32_t)m, n, rp_v3_dot(n, x), r);
     if (k < 3)
         return 0;
-    /* F = 1/(2 pi) sum_i gamma_i n . (R_i x R_i+1) / |R_i x R_i+1|
-     * (Lambert; Baum, Rushmeier & Winget 1989, eq. 3). */
-    double sum = 0;
-    for (int i = 0; i < k; i++) {
-        rp_vec3 a = r[i], b = r[(i + 1) % k];
-        rp_vec3 c = rp_v3_cross(a, b);
-        double cl = rp_v3_length(c);
-        if (!(cl > 0))
-            continue;
-        double gamma = atan2(cl, rp_v3_dot(a, b));
-        sum += gamma * rp_v3_dot(n, c) / cl;
-    }
-    return fabs(sum) / (2.0 * RP_PI);
+    return fabs(rp_ff_point_polygon(x, n, r, k));
 }
 
 /* Inverse of the bilinear map P(u, v) of a planar quad, in the face's own
