@@ -544,6 +544,72 @@ Test(hier, idle_refinement_keeps_links, .init = hsetup, .timeout = 120)
     rp_scene_destroy(scene);
 }
 
+/* 1 if face f crosses another face's plane or another face crosses f's. */
+static int crosses_a_plane(const hier_state *s, uint32_t f)
+{
+    for (uint32_t g = 0; g < s->nfaces; g++) {
+        if (g == f)
+            continue;
+        for (int k = 0; k < 2; k++) {
+            const hier_node *a = &s->nodes[k ? f : g];
+            const hier_face *b = &s->faces[k ? g : f];
+            double lo = INFINITY, hi = -INFINITY;
+            for (int v = 0; v < a->nverts; v++) {
+                double d = rp_v3_dot(b->n, a->v[v]) - b->d;
+                lo = fmin(lo, d);
+                hi = fmax(hi, d);
+            }
+            if (lo < -s->eps && hi > s->eps)
+                return 1;
+        }
+    }
+    return 0;
+}
+
+/* --contact-levels: only pairs in which one element crosses the other's
+ * plane (the floor and the sides of the boxes standing on it, the lamp and
+ * the planes of the boxes' sides) go below --min-area, by 4 per level, and
+ * no further. */
+Test(hier, contact_levels, .init = hsetup, .timeout = 120)
+{
+    rp_scene *scene = rp_test_load("scenes/cornell.scene");
+    const double total = rp_scene_total_area(scene), amin = 1e-4 * total;
+    const rp_surface *surf = rp_scene_surfaces(scene);
+    for (int levels = 0; levels <= 2; levels++) {
+        char lv[8];
+        snprintf(lv, sizeof lv, "%d", levels);
+        hrun r;
+        const char *kv[] = {"bf-epsilon", "0.05", "min-area", "1e-4", "contact-levels", lv, NULL};
+        solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+        size_t n = rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0);
+        double *area = malloc(n * sizeof *area);
+        uint32_t *sf = malloc(n * sizeof *sf);
+        cr_assert(area && sf);
+        rp_hierarchical_leaves(r.state, area, sf, NULL, n);
+        double smallest = INFINITY;
+        size_t below = 0;
+        for (size_t i = 0; i < n; i++) {
+            smallest = fmin(smallest, area[i]);
+            if (area[i] < amin * (1 - 1e-9)) {
+                below++;
+                cr_assert(crosses_a_plane(r.state, surf[sf[i]].first_face), "a leaf of %s below --min-area",
+                          surf[sf[i]].name);
+            }
+        }
+        cr_log_info("contact-levels %d: %zu leaves, %zu below min-area, smallest %.3g x min-area", levels, n,
+                    below, smallest / amin);
+        cr_assert_geq(smallest, ldexp(amin, -2 * levels) * (1 - 1e-9));
+        if (levels == 0)
+            cr_assert_eq(below, 0);
+        else
+            cr_assert_lt(smallest, ldexp(amin, -2 * levels + 2) * (1 - 1e-9), "level %d not reached", levels);
+        free(area);
+        free(sf);
+        hrun_end(&r);
+    }
+    rp_scene_destroy(scene);
+}
+
 Test(hier, refuses_bad_options, .init = hsetup)
 {
     rp_scene *scene = rp_test_load("scenes/cube-ceiling.scene");
@@ -551,6 +617,9 @@ Test(hier, refuses_bad_options, .init = hsetup)
     hrun r;
     const char *bad[] = {"reconstruct", "phong", NULL};
     cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, bad, &err), RP_ERR_INPUT);
+    hrun_end(&r);
+    const char *deep[] = {"contact-levels", "9", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, deep, &err), RP_ERR_INPUT);
     hrun_end(&r);
     const char *few[] = {"max-faces", "5", NULL};
     cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, few, &err), RP_ERR_UNSUPPORTED);

@@ -193,6 +193,8 @@ typedef struct hier_state {
     /* Parameters. */
     double bf_rel, min_area_rel;   /* as given: relative */
     double bf_eps, min_area;       /* absolute */
+    unsigned contact_levels;
+    double min_area_contact;       /* min_area / 4^contact_levels */
     double partial_weight;
     double invisible_weight;
     double tolerance;

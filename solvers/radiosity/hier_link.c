@@ -459,7 +459,12 @@ static int decide(const hier_state *s, const hier_link *l)
     double scale = s->clustering ? hier_min(1.0, q->area / s->cl_area) : 1.0;
     if (!(e * l->F_err * scale > s->bf_eps))
         return 0;
-    int can_q = 0.25 * q->area >= s->min_area, can_p = 0.25 * p->area >= s->min_area;
+    /* Pairs where one element crosses the other's plane meet along a
+     * line (a box standing on the floor) or nearly: there the kernel is
+     * singular and the light discontinuous (a D0 discontinuity, Heckbert
+     * 1992), so they may go --contact-levels deeper. */
+    double amin = (l->flags & HIER_LINK_STRADDLE) ? s->min_area_contact : s->min_area;
+    int can_q = 0.25 * q->area >= amin, can_p = 0.25 * p->area >= amin;
     if (!s->faces[p->face].reflects && !(l->flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE)))
         /* A pure emitter's radiosity is uniform and the contour integral
          * is exact over the whole source: splitting it changes nothing, so

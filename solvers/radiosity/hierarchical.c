@@ -53,8 +53,14 @@ static const rp_option_spec hier_options[] = {
      "refine a link while rho_receiver x B_source x F exceeds EPS x the scene's mean emitted "
      "radiosity (BF refinement)",
      HIER_DEFAULT_BF},
-    {"min-area", "FRAC", "smallest element area, as a fraction of the scene's total surface area",
+    {"min-area", "FRAC",
+     "smallest element area, as a fraction of the scene's total surface area (see also "
+     "--contact-levels)",
      HIER_DEFAULT_MIN_AREA},
+    {"contact-levels", "N",
+     "pairs in which one element crosses the other's plane (a box standing on the floor) may be "
+     "refined N quadtree levels below --min-area",
+     "1"},
     {"partial-weight", "W",
      "partially visible links (and pairs crossing each other's planes) are judged by W x their "
      "unoccluded form factor, so shadow boundaries are refined first",
@@ -252,7 +258,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->invisible_weight = 0.25;
     s->tolerance = 1e-6;
     s->cl_area_rel = 1e-3;
-    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16, vr = 1;
+    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16, vr = 1, cl = 1;
     s->max_faces = HIER_DEFAULT_MAX_FACES;
     if ((st = rp_options_double(o, "bf-epsilon", 0, 1e6, &s->bf_rel, err)) != RP_OK ||
         (st = rp_options_double(o, "min-area", 1e-15, 1, &s->min_area_rel, err)) != RP_OK ||
@@ -265,6 +271,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         (st = rp_options_uint(o, "spp", 1, 1u << 20, &spp, err)) != RP_OK ||
         (st = rp_options_uint(o, "gather-rays", 1, 1u << 20, &gr, err)) != RP_OK ||
         (st = rp_options_uint(o, "vertex-rays", 1, 64, &vr, err)) != RP_OK ||
+        (st = rp_options_uint(o, "contact-levels", 0, 8, &cl, err)) != RP_OK ||
         (st = rp_options_uint(o, "cluster-rays", 1, 256, &crays, err)) != RP_OK ||
         (st = rp_options_double(o, "cluster-area", 0, 1, &s->cl_area_rel, err)) != RP_OK)
         return st;
@@ -287,6 +294,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->spp = (unsigned)spp;
     s->gather_rays = (unsigned)gr;
     s->vertex_rays = (unsigned)vr;
+    s->contact_levels = (unsigned)cl;
     s->recon = HIER_RECON_GOURAUD;
     const char *rm = rp_options_get(o, "reconstruct");
     if (rm) {
@@ -341,6 +349,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         emean = hier_max(emean, s->e_norm[b] / rp_scene_total_area(scene));
     s->bf_eps = s->bf_rel * emean;
     s->min_area = s->min_area_rel * s->total_area;
+    s->min_area_contact = ldexp(s->min_area, -2 * (int)s->contact_levels);
     s->cl_area = s->cl_area_rel * s->total_area;
     s->eps = 1e-9 * rp_scene_diagonal(scene);
 
