@@ -337,16 +337,23 @@ Test(hier, links_grow_as_epsilon_shrinks, .init = hsetup, .timeout = 600)
 
 /* ---- images ------------------------------------------------------------ */
 
+/* Solves, then builds the Gouraud vertex values (hier_image.c). */
+static hier_vertices *solve_vertices(hrun *r, const rp_scene *scene, const char *const *kv)
+{
+    solve_hier(r, scene, RP_WANT_IMAGE, 0, kv);
+    rp_error err = {""};
+    hier_vertices *hv = NULL;
+    cr_assert_eq(hier_vertices_create(r->state, &hv, &err), RP_OK, "%s", err.message);
+    return hv;
+}
+
 Test(hier, gouraud_is_crack_free, .init = hsetup, .timeout = 300)
 {
     rp_scene *scene = rp_test_load("scenes/cornell.scene");
     hrun r;
     const char *kv[] = {"bf-epsilon", "0.1", NULL};
-    solve_hier(&r, scene, RP_WANT_IMAGE, 0, kv);
+    hier_vertices *hv = solve_vertices(&r, scene, kv);
     const hier_state *s = r.state;
-    rp_error err = {""};
-    hier_vertices *hv = NULL;
-    cr_assert_eq(hier_vertices_create(s, &hv, &err), RP_OK, "%s", err.message);
     size_t tcount = hier_vertices_tcount(hv);
     cr_assert_gt(tcount, 0, "no T-vertex: the test would prove nothing");
     const size_t nb = s->nb;
@@ -421,11 +428,8 @@ Test(hier, gouraud_vertices_are_point_values, .init = hsetup)
                                     "quad emitter lamp  0 0 1  0 1 1  1 1 1  1 0 1\n");
     hrun r;
     const char *kv[] = {"bf-epsilon", "1e6", NULL};
-    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    hier_vertices *hv = solve_vertices(&r, scene, kv);
     const hier_state *s = r.state;
-    rp_error err = {""};
-    hier_vertices *hv = NULL;
-    cr_assert_eq(hier_vertices_create(s, &hv, &err), RP_OK, "%s", err.message);
     cr_assert_eq(s->nodes[0].child, RP_NONE, "the receiver was refined");
     double leaf = s->B[0];
     const double corner[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
@@ -453,11 +457,8 @@ Test(hier, gouraud_furnace, .init = hsetup, .timeout = 120)
     rp_scene *scene = rp_test_load("scenes/furnace.scene");
     hrun r;
     const char *kv[] = {"bf-epsilon", "0.05", "tolerance", "1e-12", NULL};
-    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    hier_vertices *hv = solve_vertices(&r, scene, kv);
     const hier_state *s = r.state;
-    rp_error err = {""};
-    hier_vertices *hv = NULL;
-    cr_assert_eq(hier_vertices_create(s, &hv, &err), RP_OK, "%s", err.message);
     double worst = 0;
     size_t n = 0;
     for (size_t i = 0; i < s->nnodes; i++) {
