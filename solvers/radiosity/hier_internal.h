@@ -242,9 +242,10 @@ size_t hier_bytes(const hier_state *s);
 /* ---- hier_link.c ---- */
 
 /* The form factor from a point x (unit normal n) on a receiver to source
- * node p: 0 if x is not in front of p; with far_ok, the disk approximation
- * far away; else the contour integral. */
-double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, int far_ok);
+ * node p: 0 if x is not in front of p; the disk approximation where the
+ * squared distance exceeds far_ratio x p's area (never for 0); else the
+ * contour integral. */
+double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, double far_ratio);
 
 rp_status hier_cull_init(hier_state *s, rp_error *err);
 /* Links every pair of faces that can see each other. */

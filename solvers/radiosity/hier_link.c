@@ -159,14 +159,14 @@ static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_nod
 
 /* ---- form-factor estimates ---- */
 
-double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, int far_ok)
+double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, double far_ratio)
 {
     const hier_face *fp = &s->faces[p->face];
     if (rp_v3_dot(fp->n, x) - fp->d <= 0)
         return 0; /* x sees the back of p (which is black and one-sided) */
     rp_vec3 d = rp_v3_sub(p->c, x);
     double r2 = rp_v3_dot(d, d);
-    if (far_ok && r2 > HIER_DISK_RATIO * p->area) {
+    if (far_ratio > 0 && r2 > far_ratio * p->area) {
         /* A disk of p's area facing along its normal (Wallace, Elmquist &
          * Haines 1989, eq. 6): F = A cos_q cos_p / (pi r^2 + A). */
         double r = sqrt(r2);
@@ -207,14 +207,14 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
     const int emitter = !fp->reflects;
     rp_vec3 dc = rp_v3_sub(p->c, q->c);
     if (!straddle && rp_v3_dot(dc, dc) > HIER_NEAR_RATIO * q->area) {
-        F = Fmax = hier_point_to_node(s, q->c, fq->n, p, 1);
+        F = Fmax = hier_point_to_node(s, q->c, fq->n, p, HIER_DISK_RATIO);
         if (emitter) {
             /* How much the kernel varies across q, from its four quarters. */
             rp_vec3 cc[4];
             double ca[4];
             hier_child_centroids(q, cc, ca);
             for (int k = 0; k < 4; k++)
-                Fvar = hier_max(Fvar, fabs(hier_point_to_node(s, cc[k], fq->n, p, 1) - F));
+                Fvar = hier_max(Fvar, fabs(hier_point_to_node(s, cc[k], fq->n, p, HIER_DISK_RATIO) - F));
         }
     } else {
         /* Near pairs (the kernel varies across q: point estimates at the
