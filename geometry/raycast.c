@@ -435,6 +435,33 @@ int rp_ray_occluded(const rp_raycast *rc, rp_vec3 a, rp_vec3 na, rp_vec3 b, rp_v
     return ray.tfar < 0.0f;
 }
 
+void rp_ray_occluded_n(const rp_raycast *rc, size_t n, const rp_vec3 *a, rp_vec3 na, const rp_vec3 *b, rp_vec3 nb,
+                       unsigned char *blocked)
+{
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    struct RTCRay ray[RP_RAYCAST_STREAM];
+    for (size_t start = 0; start < n; start += RP_RAYCAST_STREAM) {
+        size_t m = n - start < RP_RAYCAST_STREAM ? n - start : RP_RAYCAST_STREAM;
+        for (size_t i = 0; i < m; i++) {
+            /* As rp_ray_occluded; a degenerate segment is a free ray of
+             * length 0. */
+            rp_vec3 ab = rp_v3_sub(b[start + i], a[start + i]);
+            rp_vec3 a2 = rp_offset(rc, a[start + i], na, ab);
+            rp_vec3 b2 = rp_offset(rc, b[start + i], nb, rp_v3_scale(ab, -1.0));
+            rp_vec3 d = rp_v3_sub(b2, a2);
+            double len = rp_v3_length(d);
+            if (len > 0)
+                d = rp_v3_scale(d, 1.0 / len);
+            rp_ray_init(rc, &ray[i], a2, d, len > 0 ? len * (1.0 - RP_RAYCAST_OCCLUDE_SHORTEN) : 0.0);
+        }
+        rtcOccluded1M(rc->rtc, &ctx, ray, (unsigned)m, sizeof ray[0]);
+        for (size_t i = 0; i < m; i++)
+            blocked[start + i] = ray[i].tfar < 0.0f;
+    }
+}
+
 /* n rays through rtcIntersect1M in blocks of RP_RAYCAST_STREAM; the
  * origin of ray i is o[i * o_stride] (stride 0: one origin for all). */
 static void rp_ray_stream(const rp_raycast *rc, size_t n, const rp_vec3 *o, size_t o_stride, const rp_vec3 *d,

@@ -56,6 +56,12 @@ int rp_ray_closest_from(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, r
  * is blocked by any face; both ends are offset off their surfaces. */
 int rp_ray_occluded(const rp_raycast *rc, rp_vec3 a, rp_vec3 na, rp_vec3 b, rp_vec3 nb);
 
+/* rp_ray_occluded for n segments a[i] -> b[i] between two surfaces
+ * (normals na, nb), traced as one coherent stream: blocked[i] = 1 when
+ * segment i is blocked. */
+void rp_ray_occluded_n(const rp_raycast *rc, size_t n, const rp_vec3 *a, rp_vec3 na, const rp_vec3 *b, rp_vec3 nb,
+                       unsigned char *blocked);
+
 /* Closest hits of n rays from one origin o (camera rays through
  * neighbouring pixels), traced as a coherent stream; otherwise as
  * rp_ray_closest_n with tmax infinite. */

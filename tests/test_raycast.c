@@ -360,6 +360,37 @@ Test(raycast, coherent_stream_matches_single_rays)
     gsl_rng_free(r);
 }
 
+/* Segments between two parallel planes across a random scene, traced as one
+ * coherent occlusion stream: the same answers as rp_ray_occluded one by one
+ * (more than one stream block, some blocked and some open). */
+Test(raycast, occluded_stream_matches_single_rays)
+{
+    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
+    gsl_rng_set(r, 779);
+    rp_scene *s = random_scene(r, 100, 100);
+    rp_raycast *rc = make_rc(s, NULL);
+    enum { N = 150 };
+    rp_vec3 a[N], b[N];
+    unsigned char blocked[N];
+    const rp_vec3 na = rp_v3(0, 0, 1), nb = rp_v3(0, 0, -1);
+    for (int i = 0; i < N; i++) {
+        a[i] = rp_v3(-1 + 2 * gsl_rng_uniform(r), -1 + 2 * gsl_rng_uniform(r), -3.0);
+        b[i] = rp_v3(-1 + 2 * gsl_rng_uniform(r), -1 + 2 * gsl_rng_uniform(r), 3.0);
+    }
+    rp_ray_occluded_n(rc, N, a, na, b, nb, blocked);
+    int nblocked = 0;
+    for (int i = 0; i < N; i++) {
+        cr_assert_eq(blocked[i], rp_ray_occluded(rc, a[i], na, b[i], nb), "segment %d", i);
+        nblocked += blocked[i];
+    }
+    cr_log_info("%d of %d segments blocked", nblocked, N);
+    cr_assert_gt(nblocked, N / 10);
+    cr_assert_lt(nblocked, N - N / 10);
+    rp_raycast_destroy(rc);
+    rp_scene_destroy(s);
+    gsl_rng_free(r);
+}
+
 /* ---- front / back ----------------------------------------------------- */
 
 Test(raycast, front_and_back)

@@ -269,28 +269,37 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
             perm[j] = t;
         }
         unsigned valid = 0, open = 0;
-        double wsum = 0, wopen = 0;
+        double wsum = 0, wopen = 0, w[64];
+        rp_vec3 a[64], b[64];
+        unsigned char blocked[64];
         for (unsigned k = 0; k < N; k++) {
             double u1 = ((k % m) + hier_u01(key, 4 * (uint64_t)k)) / m;
             double u2 = ((k / m) + hier_u01(key, 4 * (uint64_t)k + 1)) / m;
             double w1 = ((perm[k] % m) + hier_u01(key, 4 * (uint64_t)k + 2)) / m;
             double w2 = ((perm[k] / m) + hier_u01(key, 4 * (uint64_t)k + 3)) / m;
-            rp_vec3 a = hier_node_point(q, u1, u2), b = hier_node_point(p, w1, w2);
-            rp_vec3 ab = rp_v3_sub(b, a);
-            if (straddle && (rp_v3_dot(ab, fq->n) <= 0 || rp_v3_dot(ab, fp->n) >= 0))
+            rp_vec3 x = hier_node_point(q, u1, u2), y = hier_node_point(p, w1, w2);
+            rp_vec3 xy = rp_v3_sub(y, x);
+            if (straddle && (rp_v3_dot(xy, fq->n) <= 0 || rp_v3_dot(xy, fp->n) >= 0))
                 continue;
             /* Each pair weighted by its kernel cos cos / r^2: where the
              * visible part of p is the nearer one (or the one seen more
              * squarely), a plain fraction of open rays would understate the
              * energy it passes. */
-            double r2 = rp_v3_dot(ab, ab);
-            double w = hier_max(rp_v3_dot(ab, fq->n), 0) * hier_max(-rp_v3_dot(ab, fp->n), 0) / (r2 * r2);
+            double r2 = rp_v3_dot(xy, xy);
+            w[valid] = hier_max(rp_v3_dot(xy, fq->n), 0) * hier_max(-rp_v3_dot(xy, fp->n), 0) / (r2 * r2);
+            a[valid] = x;
+            b[valid] = y;
             valid++;
-            wsum += w;
-            *rays += 1;
-            if (!rp_ray_occluded(s->rc, a, fq->n, b, fp->n)) {
+        }
+        /* The segments leave one small element for another: one coherent
+         * stream. */
+        rp_ray_occluded_n(s->rc, valid, a, fq->n, b, fp->n, blocked);
+        *rays += valid;
+        for (unsigned k = 0; k < valid; k++) {
+            wsum += w[k];
+            if (!blocked[k]) {
                 open++;
-                wopen += w;
+                wopen += w[k];
             }
         }
         vis = valid ? (wsum > 0 ? wopen / wsum : (double)open / valid) : 1.0;
