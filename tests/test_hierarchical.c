@@ -43,6 +43,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "geometry/scene.h"
 #include "solvers/radiosity/hier_internal.h"
@@ -496,6 +498,47 @@ Test(hier, gouraud_furnace, .init = hsetup, .timeout = 120)
     hier_vertices_destroy(hv);
     hrun_end(&r);
     rp_scene_destroy(scene);
+}
+
+/* Faces of one surface share Gouraud vertices only within 30 degrees of
+ * each other.  One mesh surface, never refined: two coplanar triangles and
+ * one folded 20 degrees along their shared edge's far side share corners;
+ * a fourth folded 90 degrees keeps its own; a lamp above.  Corners: the
+ * flat square's 4, one more for the 20-degree flap, and 3 of the upright
+ * flap's own, plus the lamp's 4. */
+Test(hier, vertices_shared_within_smoothing_groups, .init = hsetup)
+{
+    char dir[64], path[96];
+    snprintf(dir, sizeof dir, "/tmp/rp-smooth-%d", (int)getpid());
+    cr_assert_eq(mkdir(dir, 0700), 0);
+    snprintf(path, sizeof path, "%s/fold.obj", dir);
+    FILE *f = fopen(path, "w");
+    cr_assert(f);
+    double c = cos(20 * RP_PI / 180), sn = sin(20 * RP_PI / 180);
+    fprintf(f, "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv %.17g 0.5 %.17g\nv 0 1 1\nv 0 0 1\n", 1 + c, sn);
+    /* Flat square (two triangles), the 20-degree flap on edge 2-3... */
+    fprintf(f, "f 1 2 3\nf 1 3 4\nf 2 5 3\n");
+    /* ...and an upright flap on edge 4-1 (x = 0), facing +x. */
+    fprintf(f, "f 1 4 6\nf 1 6 7\n");
+    fclose(f);
+    rp_scene *scene = rp_test_parse_in("bands grey\n"
+                                       "material w reflect 0.5\n"
+                                       "material l reflect 0 emit 1\n"
+                                       "mesh fold w fold.obj\n"
+                                       "quad lamp l  0.2 0.2 2  0.2 0.8 2  0.8 0.8 2  0.8 0.2 2\n",
+                                       dir);
+    cr_assert(scene);
+    hrun r;
+    const char *kv[] = {"bf-epsilon", "1e6", NULL};
+    hier_vertices *hv = solve_vertices(&r, scene, kv);
+    /* Flat square and 20-degree flap: 1 2 3 4 5; upright flap: its own
+     * copies of 1 and 4, and 6 7; lamp 4. */
+    cr_assert_eq(hier_vertices_count(hv), 5 + 4 + 4, "%zu vertices", hier_vertices_count(hv));
+    hier_vertices_destroy(hv);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+    remove(path);
+    rmdir(dir);
 }
 
 Test(hier, same_answer_for_any_thread_count, .init = hsetup, .timeout = 300)

@@ -66,6 +66,7 @@ typedef struct vtx_table {
     size_t n, cap;       /* vertices */
     rp_vec3 *p;
     uint32_t *surface;
+    rp_vec3 *nrm;        /* unit normal of the first face that has it */
     double *acc;         /* n x nb: sum over the leaves with this corner of
                             A x (radiosity there through that leaf's links) */
     double *area;
@@ -89,16 +90,24 @@ static uint64_t vtx_hash(uint32_t surface, rp_vec3 p)
     return h;
 }
 
-static int vtx_same(const vtx_table *t, uint32_t id, uint32_t surface, rp_vec3 p)
+/* Faces of one surface share a vertex where their normals are within 30
+ * degrees of the first face's at it (a smoothing group, as a crease angle
+ * in mesh shading): a curved mesh is interpolated across its triangles, but
+ * the floor and the walls of a `box` room, one surface, keep their own
+ * values along the edges where they meet. */
+#define VTX_SMOOTH_COS 0.86602540378443865
+
+static int vtx_same(const vtx_table *t, uint32_t id, uint32_t surface, rp_vec3 p, rp_vec3 n)
 {
-    return t->surface[id] == surface && t->p[id].x == p.x && t->p[id].y == p.y && t->p[id].z == p.z;
+    return t->surface[id] == surface && t->p[id].x == p.x && t->p[id].y == p.y && t->p[id].z == p.z &&
+           rp_v3_dot(t->nrm[id], n) >= VTX_SMOOTH_COS;
 }
 
-static uint32_t vtx_find(const vtx_table *t, uint32_t surface, rp_vec3 p)
+static uint32_t vtx_find(const vtx_table *t, uint32_t surface, rp_vec3 p, rp_vec3 n)
 {
     size_t h = (size_t)vtx_hash(surface, p) & t->hmask;
     while (t->slot[h] != RP_NONE) {
-        if (vtx_same(t, t->slot[h], surface, p))
+        if (vtx_same(t, t->slot[h], surface, p, n))
             return t->slot[h];
         h = (h + 1) & t->hmask;
     }
@@ -106,17 +115,18 @@ static uint32_t vtx_find(const vtx_table *t, uint32_t surface, rp_vec3 p)
 }
 
 /* The table is sized for every corner up front, so it never fills. */
-static uint32_t vtx_insert(vtx_table *t, uint32_t surface, rp_vec3 p)
+static uint32_t vtx_insert(vtx_table *t, uint32_t surface, rp_vec3 p, rp_vec3 n)
 {
     size_t h = (size_t)vtx_hash(surface, p) & t->hmask;
     while (t->slot[h] != RP_NONE) {
-        if (vtx_same(t, t->slot[h], surface, p))
+        if (vtx_same(t, t->slot[h], surface, p, n))
             return t->slot[h];
         h = (h + 1) & t->hmask;
     }
     uint32_t id = (uint32_t)t->n++;
     t->slot[h] = id;
     t->p[id] = p;
+    t->nrm[id] = n;
     t->surface[id] = surface;
     t->ta[id] = t->tb[id] = RP_NONE;
     t->tlen[id] = 0;
@@ -131,6 +141,7 @@ static void vtx_free(vtx_table *t)
 {
     free(t->p);
     free(t->surface);
+    free(t->nrm);
     free(t->acc);
     free(t->area);
     free(t->ta);
@@ -152,6 +163,7 @@ static int vtx_alloc(vtx_table *t, size_t cap, size_t nb)
     t->hmask = hs - 1;
     t->p = malloc(cap * sizeof *t->p);
     t->surface = malloc(cap * sizeof *t->surface);
+    t->nrm = malloc(cap * sizeof *t->nrm);
     t->acc = malloc(cap * nb * sizeof *t->acc);
     t->area = malloc(cap * sizeof *t->area);
     t->ta = malloc(cap * sizeof *t->ta);
@@ -160,7 +172,7 @@ static int vtx_alloc(vtx_table *t, size_t cap, size_t nb)
     t->val = malloc(cap * nb * sizeof *t->val);
     t->state = malloc(cap);
     t->slot = malloc(hs * sizeof *t->slot);
-    if (!t->p || !t->surface || !t->acc || !t->area || !t->ta || !t->tb || !t->tlen || !t->val ||
+    if (!t->p || !t->surface || !t->nrm || !t->acc || !t->area || !t->ta || !t->tb || !t->tlen || !t->val ||
         !t->state || !t->slot)
         return 0;
     for (size_t k = 0; k < hs; k++)
@@ -172,12 +184,12 @@ static int vtx_alloc(vtx_table *t, size_t cap, size_t nb)
  * vertex of some finer leaf is a T-vertex, anchored to the longest leaf
  * edge it lies inside.  Its value is the mean of the edge's two ends, which
  * applied recursively is linear interpolation along the coarse edge. */
-static void vtx_probe(vtx_table *t, uint32_t surface, uint32_t a, uint32_t b, double len2, int depth)
+static void vtx_probe(vtx_table *t, uint32_t surface, rp_vec3 n, uint32_t a, uint32_t b, double len2, int depth)
 {
     if (depth > 48)
         return;
     rp_vec3 m = rp_v3_scale(rp_v3_add(t->p[a], t->p[b]), 0.5); /* as hier_tree.c's mid() */
-    uint32_t id = vtx_find(t, surface, m);
+    uint32_t id = vtx_find(t, surface, m, n);
     if (id == RP_NONE)
         return; /* no finer leaf meets this edge here (nor, then, nearer the ends) */
     if (id == a || id == b)
@@ -187,8 +199,8 @@ static void vtx_probe(vtx_table *t, uint32_t surface, uint32_t a, uint32_t b, do
         t->tb[id] = b;
         t->tlen[id] = len2;
     }
-    vtx_probe(t, surface, a, id, 0.25 * len2, depth + 1);
-    vtx_probe(t, surface, id, b, 0.25 * len2, depth + 1);
+    vtx_probe(t, surface, n, a, id, 0.25 * len2, depth + 1);
+    vtx_probe(t, surface, n, id, b, 0.25 * len2, depth + 1);
 }
 
 static const double *vtx_value(vtx_table *t, uint32_t id)
@@ -426,7 +438,7 @@ rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_erro
         uint32_t *c = hv->lv + (size_t)hv->leafpos[i] * 4;
         c[3] = RP_NONE;
         for (int k = 0; k < nd->nverts; k++) {
-            c[k] = vtx_insert(t, sf, nd->v[k]);
+            c[k] = vtx_insert(t, sf, nd->v[k], s->faces[nd->face].n);
             t->area[c[k]] += nd->area;
         }
     }
@@ -439,7 +451,7 @@ rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_erro
         for (int k = 0; k < nd->nverts; k++) {
             uint32_t a = c[k], b = c[(k + 1) % nd->nverts];
             rp_vec3 d = rp_v3_sub(t->p[b], t->p[a]);
-            vtx_probe(t, sf, a, b, rp_v3_dot(d, d), 0);
+            vtx_probe(t, sf, s->faces[nd->face].n, a, b, rp_v3_dot(d, d), 0);
         }
     }
     for (size_t v = 0; v < t->n; v++)
@@ -453,6 +465,8 @@ rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_erro
 }
 
 size_t hier_vertices_tcount(const hier_vertices *v) { return v->tcount; }
+
+size_t hier_vertices_count(const hier_vertices *v) { return v->t.n; }
 
 void hier_vertices_eval(const hier_state *s, const hier_vertices *v, uint32_t face, rp_vec3 p, double *B)
 {

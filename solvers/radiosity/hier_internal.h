@@ -290,8 +290,9 @@ rp_status hier_vertices_create(const hier_state *s, hier_vertices **out, rp_erro
 void hier_vertices_destroy(hier_vertices *v);
 /* Interpolated radiosity (nb bands) at point p of face `face`. */
 void hier_vertices_eval(const hier_state *s, const hier_vertices *v, uint32_t face, rp_vec3 p, double *B);
-/* How many vertices were anchored as T-vertices. */
+/* How many vertices were anchored as T-vertices, and how many there are. */
 size_t hier_vertices_tcount(const hier_vertices *v);
+size_t hier_vertices_count(const hier_vertices *v);
 
 /* ---- shared helpers ---- */
 
