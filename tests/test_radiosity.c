@@ -33,9 +33,11 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "geometry/mesh.h"
 #include "geometry/scene.h"
 #include "scene_util.h"
 #include "solvers/radiosity/formfactor.h"
+#include "solvers/radiosity/reconstruct.h"
 #include "solvers/radiosity/system.h"
 #include "solvers/solver.h"
 
@@ -687,5 +689,46 @@ Test(radiosity, same_answers_for_any_thread_count, .init = setup, .timeout = 300
         free(img[t]);
         free(B[t]);
     }
+    rp_scene_destroy(sc);
+}
+
+/* Gouraud corners follow smoothing groups (reconstruct.h): a `box` room is
+ * one surface of six faces meeting at right angles, so no corner value mixes
+ * two faces.  With B = the element's face number, every corner of every
+ * element must read its own face's number, also along the room's edges
+ * where the mesh shares vertices between faces. */
+Test(radiosity, gouraud_corners_keep_creases)
+{
+    rp_scene *sc = rp_test_parse("bands grey\n"
+                                 "material w reflect 0.5\n"
+                                 "material l reflect 0 emit 1\n"
+                                 "box room w  0 0 0  1 1 1  inward\n"
+                                 "quad lamp l  0.4 0.99 0.4  0.6 0.99 0.4  0.6 0.99 0.6  0.4 0.99 0.6\n");
+    rp_mesh *mesh = NULL;
+    rp_error err = {""};
+    rp_mesh_params mp = {.size = sizeof mp, .target_count = 96};
+    cr_assert_eq(rp_mesh_create(sc, &mp, &mesh, &err), RP_OK, "%s", err.message);
+    const size_t n = rp_mesh_nelements(mesh);
+    const rp_element *el = rp_mesh_elements(mesh);
+    double *B = malloc(n * sizeof *B), *C = malloc(n * 4 * sizeof *C);
+    cr_assert(B && C);
+    for (size_t e = 0; e < n; e++)
+        B[e] = el[e].face;
+    cr_assert(rp_recon_corners(mesh, 1, B, C));
+    size_t shared = 0;
+    for (size_t e = 0; e < n; e++)
+        for (uint32_t k = 0; k < el[e].nverts; k++) {
+            if (el[e].surface != el[0].surface)
+                continue; /* the lamp */
+            cr_assert_eq(C[e * 4 + k], B[e], "element %zu corner %u: %g, face %g", e, k, C[e * 4 + k], B[e]);
+            size_t cnt;
+            const uint32_t *inc = rp_mesh_vertex_elements(mesh, el[e].v[k], &cnt);
+            for (size_t j = 0; j < cnt; j++)
+                shared += el[inc[j]].face != el[e].face;
+        }
+    cr_assert_gt(shared, 0, "no vertex is shared between faces: the test would prove nothing");
+    free(B);
+    free(C);
+    rp_mesh_destroy(mesh);
     rp_scene_destroy(sc);
 }

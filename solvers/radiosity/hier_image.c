@@ -91,16 +91,13 @@ static uint64_t vtx_hash(uint32_t surface, rp_vec3 p)
 }
 
 /* Faces of one surface share a vertex where their normals are within 30
- * degrees of the first face's at it (a smoothing group, as a crease angle
- * in mesh shading): a curved mesh is interpolated across its triangles, but
- * the floor and the walls of a `box` room, one surface, keep their own
- * values along the edges where they meet. */
-#define VTX_SMOOTH_COS 0.86602540378443865
+ * degrees of the first face's at it (a smoothing group, RP_RECON_SMOOTH_COS
+ * as for the uniform meshes' Gouraud images). */
 
 static int vtx_same(const vtx_table *t, uint32_t id, uint32_t surface, rp_vec3 p, rp_vec3 n)
 {
     return t->surface[id] == surface && t->p[id].x == p.x && t->p[id].y == p.y && t->p[id].z == p.z &&
-           rp_v3_dot(t->nrm[id], n) >= VTX_SMOOTH_COS;
+           rp_v3_dot(t->nrm[id], n) >= RP_RECON_SMOOTH_COS;
 }
 
 static uint32_t vtx_find(const vtx_table *t, uint32_t surface, rp_vec3 p, rp_vec3 n)

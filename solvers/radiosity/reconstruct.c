@@ -56,25 +56,64 @@ void rp_recon_surfaces(const rp_scene *scene, const rp_mesh *mesh, size_t nb, co
     }
 }
 
-void rp_recon_vertices(const rp_mesh *mesh, size_t nb, const double *B, double *out)
+int rp_recon_corners(const rp_mesh *mesh, size_t nb, const double *B, double *out)
 {
     const rp_element *el = rp_mesh_elements(mesh);
-    size_t nv = rp_mesh_nvertices(mesh);
+    const size_t nv = rp_mesh_nvertices(mesh);
+    size_t maxc = 0;
+    for (size_t v = 0; v < nv; v++) {
+        size_t cnt;
+        rp_mesh_vertex_elements(mesh, (uint32_t)v, &cnt);
+        maxc = cnt > maxc ? cnt : maxc;
+    }
+    uint32_t *group = malloc((maxc ? maxc : 1) * sizeof *group);
+    double *sum = malloc((maxc ? maxc : 1) * (nb + 1) * sizeof *sum);
+    if (!group || !sum) {
+        free(group);
+        free(sum);
+        return 0;
+    }
     for (size_t v = 0; v < nv; v++) {
         size_t cnt;
         const uint32_t *inc = rp_mesh_vertex_elements(mesh, (uint32_t)v, &cnt);
-        double *o = out + v * nb, area = 0;
-        for (size_t b = 0; b < nb; b++)
-            o[b] = 0;
+        /* Smoothing groups: each incident element joins the first group
+         * whose first element's normal is within RP_RECON_SMOOTH_COS of its
+         * own, else starts one; so every element has one group here and
+         * two elements of a group interpolate the same value (no cracks). */
+        size_t ng = 0;
         for (size_t k = 0; k < cnt; k++) {
+            size_t g = 0;
+            while (g < ng && rp_v3_dot(el[inc[group[g]]].normal, el[inc[k]].normal) < RP_RECON_SMOOTH_COS)
+                g++;
+            if (g == ng) {
+                group[ng] = (uint32_t)k; /* first member */
+                for (size_t b = 0; b <= nb; b++)
+                    sum[ng * (nb + 1) + b] = 0;
+                ng++;
+            }
             const rp_element *e = &el[inc[k]];
-            area += e->area;
+            double *sg = sum + g * (nb + 1);
             for (size_t b = 0; b < nb; b++)
-                o[b] += e->area * B[(size_t)inc[k] * nb + b];
+                sg[b] += e->area * B[(size_t)inc[k] * nb + b];
+            sg[nb] += e->area;
         }
-        for (size_t b = 0; b < nb; b++)
-            o[b] = area > 0 ? o[b] / area : 0;
+        for (size_t k = 0; k < cnt; k++) {
+            size_t g = 0;
+            while (rp_v3_dot(el[inc[group[g]]].normal, el[inc[k]].normal) < RP_RECON_SMOOTH_COS)
+                g++;
+            const rp_element *e = &el[inc[k]];
+            uint32_t c = 0;
+            while (c < e->nverts && e->v[c] != v)
+                c++;
+            const double *sg = sum + g * (nb + 1);
+            double *o = out + ((size_t)inc[k] * 4 + c) * nb;
+            for (size_t b = 0; b < nb; b++)
+                o[b] = sg[nb] > 0 ? sg[b] / sg[nb] : 0;
+        }
     }
+    free(group);
+    free(sum);
+    return 1;
 }
 
 /* Counter-based random numbers: a pure function of (seed, stream, index,
@@ -132,7 +171,7 @@ typedef struct recon_job {
     const rp_recon_params *p;
     size_t nb;
     const double *B;        /* elements x nb */
-    const double *VB;       /* vertices x nb (gouraud) */
+    const double *CB;       /* elements x 4 corners x nb (gouraud) */
     const rp_material **elmat; /* per element */
 } recon_job;
 
@@ -158,7 +197,7 @@ static void recon_shade(const void *ctx, const rp_hit *h, uint64_t key, double *
         const rp_element *el = &j->el[e];
         for (uint32_t k = 0; k < el->nverts; k++)
             for (size_t b = 0; b < nb; b++)
-                L[b] += w[k] * j->VB[(size_t)el->v[k] * nb + b];
+                L[b] += w[k] * j->CB[((size_t)e * 4 + k) * nb + b];
         for (size_t b = 0; b < nb; b++)
             L[b] /= RP_PI;
         return;
@@ -284,15 +323,15 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
     const size_t n = rp_mesh_nelements(mesh);
     recon_job job = {.scene = scene, .mesh = mesh, .el = rp_mesh_elements(mesh), .rc = rc,
                      .p = p, .nb = nb, .B = B};
-    double *VB = NULL;
+    double *CB = NULL;
     const rp_material **elmat = NULL;
     if (p->mode == RP_RECON_GOURAUD) {
-        size_t nv = rp_mesh_nvertices(mesh);
-        VB = malloc((nv ? nv : 1) * nb * sizeof *VB);
-        if (!VB)
+        CB = malloc((n ? n : 1) * 4 * nb * sizeof *CB);
+        if (!CB || !rp_recon_corners(mesh, nb, B, CB)) {
+            free(CB);
             return rp_error_set(err, RP_ERR_NOMEM, "out of memory for vertex radiosities");
-        rp_recon_vertices(mesh, nb, B, VB);
-        job.VB = VB;
+        }
+        job.CB = CB;
     }
     if (p->mode == RP_RECON_GATHER) {
         elmat = malloc((n ? n : 1) * sizeof *elmat);
@@ -307,7 +346,7 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
 
     rp_recon_shader shader = {recon_shade, &job, p->mode == RP_RECON_GATHER ? p->gather_rays : 1};
     rp_status st = rp_recon_camera(scene, rc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
-    free(VB);
+    free(CB);
     free(elmat);
     return st;
 }

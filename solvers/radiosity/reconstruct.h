@@ -51,10 +51,18 @@ const char *rp_recon_mode_name(rp_recon_mode m);
 void rp_recon_surfaces(const rp_scene *scene, const rp_mesh *mesh, size_t nb, const double *B,
                        double *out);
 
-/* Radiosity at each mesh vertex (nvertices x nb): the area-weighted mean of
- * B over the elements incident to it (they all lie on one surface, since
- * vertices are shared within a surface only). */
-void rp_recon_vertices(const rp_mesh *mesh, size_t nb, const double *B, double *out);
+/* Faces of one surface are interpolated across their shared edges only
+ * where their normals are within 30 degrees (a smoothing group: a curved
+ * mesh stays smooth, a `box` room's floor and walls keep their own values
+ * along their edges).  hier_image.c uses the same angle. */
+#define RP_RECON_SMOOTH_COS 0.86602540378443865
+
+/* Gouraud values at each element's corners (nelements x 4 x nb; unused
+ * slots of triangles untouched): the area-weighted mean of B over the
+ * elements incident to the corner's vertex (all on one surface, since
+ * vertices are shared within a surface only) that lie in the element's
+ * smoothing group there.  0 when out of memory. */
+int rp_recon_corners(const rp_mesh *mesh, size_t nb, const double *B, double *out);
 
 /* The camera loop shared by the finite-element methods: spp camera rays
  * per pixel (box filter, stratified jitter keyed by (seed, pixel)), each
