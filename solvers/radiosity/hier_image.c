@@ -313,38 +313,40 @@ static void point_radiosity(const hier_state *s, uint32_t i, rp_vec3 x, uint64_t
     const size_t nb = s->nb;
     const hier_node *leaf = &s->nodes[i];
     const hier_face *f = &s->faces[leaf->face];
-    double scale = s->enclosure ? s->ff_scale[i] : 1.0;
-    double gl[HIER_MAX_BANDS], gx[HIER_MAX_BANDS], Bp[HIER_MAX_BANDS];
-    double Fl = 0, Fx = 0;
+    const double scale = s->enclosure ? s->ff_scale[i] : 1.0;
+    /* Only the changes matter: dg = sum (F_l(x) - F_l) B_l and dF = sum
+     * (F_l(x) - F_l).  (Skipping links whose receiver is small against
+     * their distance, receiver area < tau d^2, saved under 15% of the time
+     * even at tau = 1e-2 and cost 0.0004 of RMSE: every link is
+     * evaluated.) */
+    double dg[HIER_MAX_BANDS], Bp[HIER_MAX_BANDS], dF = 0;
     for (size_t b = 0; b < nb; b++)
-        gl[b] = gx[b] = 0;
-    for (uint32_t a = i; a != RP_NONE; a = s->nodes[a].parent)
+        dg[b] = 0;
+    for (uint32_t a = i; a != RP_NONE; a = s->nodes[a].parent) {
         for (uint32_t k = s->link_start[a]; k < s->link_start[a + 1]; k++) {
             const hier_link *l = &s->links[k];
-            double F = l->F;
-            Fl += F;
+            const hier_node *p = &s->nodes[l->src];
+            double F;
             if (l->flags & HIER_LINK_PARTIAL)
-                F = hier_point_to_node(s, x, f->n, &s->nodes[l->src], VERTEX_DISK_RATIO) *
-                    point_visibility(s, x, f->n, &s->nodes[l->src], hier_key(key, k, 0), rays);
+                F = hier_point_to_node(s, x, f->n, p, VERTEX_DISK_RATIO) *
+                    point_visibility(s, x, f->n, p, hier_key(key, k, 0), rays);
             else
-                F = hier_point_to_node(s, x, f->n, &s->nodes[l->src], VERTEX_DISK_RATIO);
-            Fx += F;
+                F = hier_point_to_node(s, x, f->n, p, VERTEX_DISK_RATIO);
             link_source(s, l, Bp);
-            for (size_t b = 0; b < nb; b++) {
-                gl[b] += l->F * Bp[b];
-                gx[b] += F * Bp[b];
-            }
+            dF += F - l->F;
+            for (size_t b = 0; b < nb; b++)
+                dg[b] += (F - l->F) * Bp[b];
         }
-    double sx = scale;
-    if (s->enclosure) {
-        double rest = 1.0 / scale - Fl; /* cluster links' form factors */
-        sx = Fx + rest > 0 ? 1.0 / (Fx + rest) : scale;
     }
+    /* B_i = E + s_i (rho sum F_l B_l + C): at x the sums change by dg and
+     * the row sum 1 / s_i by dF. */
+    double sx = scale;
+    if (s->enclosure)
+        sx = 1.0 / scale + dF > 0 ? 1.0 / (1.0 / scale + dF) : scale;
     for (size_t b = 0; b < nb; b++) {
-        double Bi = s->B[(size_t)i * nb + b], E = RP_PI * f->Le[b];
-        /* What the leaf gathered apart from its links: clusters above. */
-        double C = (Bi - E) / scale - f->rho[b] * gl[b];
-        out[b] = hier_max(0.0, E + sx * (f->rho[b] * gx[b] + C));
+        double E = RP_PI * f->Le[b];
+        double G = (s->B[(size_t)i * nb + b] - E) / scale; /* rho sum F_l B_l + C */
+        out[b] = hier_max(0.0, E + sx * (G + f->rho[b] * dg[b]));
     }
 }
 
