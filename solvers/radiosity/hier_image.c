@@ -307,97 +307,186 @@ static double point_visibility(const hier_state *s, rp_vec3 x, rp_vec3 n, const 
  * corner) below the size of the links.  Links whose visibility rays were
  * partly blocked, or whose elements cross each other's planes, keep their
  * constant estimate: their visible fraction is known only as a mean. */
-static void point_radiosity(const hier_state *s, uint32_t i, rp_vec3 x, uint64_t key, double *rays,
-                            double *out)
+/* The changes one node's links make at x (normal n): dF += sum (F_l(x) -
+ * F_l) and dg += sum (F_l(x) - F_l) B_l over the links node a receives. */
+static void node_changes(const hier_state *s, uint32_t a, rp_vec3 x, rp_vec3 n, uint64_t key, double *rays,
+                         double *dF, double *dg)
 {
     const size_t nb = s->nb;
-    const hier_node *leaf = &s->nodes[i];
-    const hier_face *f = &s->faces[leaf->face];
-    const double scale = s->enclosure ? s->ff_scale[i] : 1.0;
-    /* Only the changes matter: dg = sum (F_l(x) - F_l) B_l and dF = sum
-     * (F_l(x) - F_l).  (Skipping links whose receiver is small against
-     * their distance, receiver area < tau d^2, saved under 15% of the time
-     * even at tau = 1e-2 and cost 0.0004 of RMSE: every link is
-     * evaluated.) */
-    double dg[HIER_MAX_BANDS], Bp[HIER_MAX_BANDS], dF = 0;
-    for (size_t b = 0; b < nb; b++)
-        dg[b] = 0;
-    for (uint32_t a = i; a != RP_NONE; a = s->nodes[a].parent) {
-        for (uint32_t k = s->link_start[a]; k < s->link_start[a + 1]; k++) {
-            const hier_link *l = &s->links[k];
-            const hier_node *p = &s->nodes[l->src];
-            double F;
-            if (l->flags & HIER_LINK_PARTIAL)
-                F = hier_point_to_node(s, x, f->n, p, VERTEX_DISK_RATIO) *
-                    point_visibility(s, x, f->n, p, hier_key(key, k, 0), rays);
-            else
-                F = hier_point_to_node(s, x, f->n, p, VERTEX_DISK_RATIO);
-            link_source(s, l, Bp);
-            dF += F - l->F;
-            for (size_t b = 0; b < nb; b++)
-                dg[b] += (F - l->F) * Bp[b];
-        }
+    double Bp[HIER_MAX_BANDS];
+    for (uint32_t k = s->link_start[a]; k < s->link_start[a + 1]; k++) {
+        const hier_link *l = &s->links[k];
+        const hier_node *p = &s->nodes[l->src];
+        double F = hier_point_to_node(s, x, n, p, VERTEX_DISK_RATIO);
+        if (l->flags & HIER_LINK_PARTIAL)
+            F *= point_visibility(s, x, n, p, hier_key(key, k, 0), rays);
+        link_source(s, l, Bp);
+        *dF += F - l->F;
+        for (size_t b = 0; b < nb; b++)
+            dg[b] += (F - l->F) * Bp[b];
     }
-    /* B_i = E + s_i (rho sum F_l B_l + C): at x the sums change by dg and
-     * the row sum 1 / s_i by dF. */
+}
+
+/* Leaf i's radiosity at a point where its chain of links changes the row
+ * sum by dF and the gathered sum by dg (node_changes): B_i = E + s_i G
+ * with G = rho sum F_l B_l + C, so there E + s_x (G + rho dg), s_x the
+ * enclosure's row-sum scale 1 / (1 / s_i + dF) (1 in open scenes). */
+static void leaf_value(const hier_state *s, uint32_t i, double dF, const double *dg, double *out)
+{
+    const hier_face *f = &s->faces[s->nodes[i].face];
+    const double scale = s->enclosure ? s->ff_scale[i] : 1.0;
     double sx = scale;
     if (s->enclosure)
         sx = 1.0 / scale + dF > 0 ? 1.0 / (1.0 / scale + dF) : scale;
-    for (size_t b = 0; b < nb; b++) {
+    for (size_t b = 0; b < s->nb; b++) {
         double E = RP_PI * f->Le[b];
-        double G = (s->B[(size_t)i * nb + b] - E) / scale; /* rho sum F_l B_l + C */
+        double G = (s->B[(size_t)i * s->nb + b] - E) / scale;
         out[b] = hier_max(0.0, E + sx * (G + f->rho[b] * dg[b]));
     }
 }
 
-/* Values at ordinary vertices: the area-weighted mean, over the leaves
- * around the vertex, of point_radiosity at the vertex through each leaf's
- * links (moved a thousandth of the way towards the leaf's centre, off the
- * edges where the contour integral is singular).  T-vertices then
- * interpolate their anchors. */
+/* Per-thread memory of the nodes whose changes at the current vertex are
+ * known: the leaves around a vertex share most of their ancestors, so each
+ * node's links are evaluated once per vertex. */
+typedef struct vtx_memo {
+    size_t n, cap, nb;
+    uint32_t *node;
+    double *dF, *dg; /* cap, cap x nb */
+} vtx_memo;
+
+static int memo_find_or_add(vtx_memo *m, uint32_t a, size_t *at)
+{
+    for (size_t k = 0; k < m->n; k++)
+        if (m->node[k] == a) {
+            *at = k;
+            return 1;
+        }
+    if (m->n == m->cap) {
+        size_t c = m->cap ? 2 * m->cap : 64;
+        uint32_t *nn = realloc(m->node, c * sizeof *nn);
+        if (nn)
+            m->node = nn;
+        double *f = realloc(m->dF, c * sizeof *f);
+        if (f)
+            m->dF = f;
+        double *g = realloc(m->dg, c * m->nb * sizeof *g);
+        if (g)
+            m->dg = g;
+        if (!nn || !f || !g)
+            return -1;
+        m->cap = c;
+    }
+    *at = m->n++;
+    m->node[*at] = a;
+    m->dF[*at] = 0;
+    for (size_t b = 0; b < m->nb; b++)
+        m->dg[*at * m->nb + b] = 0;
+    return 0;
+}
+
+/* Values at ordinary vertices (Wallace, Elmquist & Haines 1989: vertex
+ * radiosities from point-to-area form factors): the area-weighted mean,
+ * over the leaves around the vertex, of each leaf's radiosity there with
+ * every link of its chain (its own and its ancestors') re-evaluated at the
+ * vertex, moved a thousandth of the way towards the centre of the first
+ * leaf of its face (off the edges, where the contour integral is
+ * singular).  T-vertices then interpolate their anchors. */
 static int vtx_point_values(const hier_state *s, hier_vertices *hv, size_t nleaves)
 {
     vtx_table *t = &hv->t;
-    const size_t nb = t->nb;
-    double *pv = malloc((nleaves ? nleaves : 1) * 4 * nb * sizeof *pv);
+    const size_t nb = t->nb, nv = t->n;
+    /* Leaves around each ordinary vertex, in leaf order (CSR). */
+    uint32_t *start = calloc(nv + 1, sizeof *start);
+    uint32_t *inc = malloc((nleaves ? nleaves : 1) * 4 * sizeof *inc);
     uint32_t *leaf = malloc((nleaves ? nleaves : 1) * sizeof *leaf);
-    if (!pv || !leaf) {
-        free(pv);
+    if (!start || !inc || !leaf) {
+        free(start);
+        free(inc);
         free(leaf);
         return 0;
     }
     for (size_t i = 0; i < s->nnodes; i++)
         if (hv->leafpos[i] != RP_NONE)
             leaf[hv->leafpos[i]] = (uint32_t)i;
-    double nrays = 0;
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64) reduction(+ : nrays)
-    for (long j = 0; j < (long)nleaves; j++) {
-        const hier_node *nd = &s->nodes[leaf[j]];
-        const uint32_t *c = hv->lv + (size_t)j * 4;
-        for (int k = 0; k < nd->nverts; k++) {
-            if (t->ta[c[k]] != RP_NONE)
-                continue;
-            rp_vec3 x = rp_v3_madd(t->p[c[k]], rp_v3_sub(nd->c, t->p[c[k]]), 1e-3);
-            point_radiosity(s, leaf[j], x, hier_key(s->seed ^ UINT64_C(0x7674), leaf[j], (uint64_t)k), &nrays,
-                            pv + ((size_t)j * 4 + k) * nb);
+    for (size_t j = 0; j < nleaves; j++)
+        for (int k = 0; k < s->nodes[leaf[j]].nverts; k++)
+            if (t->ta[hv->lv[j * 4 + k]] == RP_NONE)
+                start[hv->lv[j * 4 + k] + 1]++;
+    for (size_t v = 0; v < nv; v++)
+        start[v + 1] += start[v];
+    for (size_t j = 0; j < nleaves; j++)
+        for (int k = 0; k < s->nodes[leaf[j]].nverts; k++) {
+            uint32_t v = hv->lv[j * 4 + k];
+            if (t->ta[v] == RP_NONE)
+                inc[start[v]++] = leaf[j];
         }
-    }
-    for (size_t v = 0; v < t->n; v++)
-        for (size_t b = 0; b < nb; b++)
-            t->acc[v * nb + b] = 0;
-    for (size_t j = 0; j < nleaves; j++) {
-        const hier_node *nd = &s->nodes[leaf[j]];
-        const uint32_t *c = hv->lv + j * 4;
-        for (int k = 0; k < nd->nverts; k++)
-            if (t->ta[c[k]] == RP_NONE)
+    for (size_t v = nv; v > 0; v--)
+        start[v] = start[v - 1];
+    start[0] = 0;
+
+    double nrays = 0;
+    int ok = 1;
+#pragma omp parallel num_threads(s->threads) reduction(+ : nrays)
+    {
+        vtx_memo m = {.nb = nb};
+        double dg[HIER_MAX_BANDS], val[HIER_MAX_BANDS];
+        uint32_t xface[32];
+        rp_vec3 xs[32];
+#pragma omp for schedule(dynamic, 64)
+        for (long v = 0; v < (long)nv; v++) {
+            double *acc = t->acc + (size_t)v * nb;
+            for (size_t b = 0; b < nb; b++)
+                acc[b] = 0;
+            m.n = 0;
+            int nx = 0;
+            const uint64_t key = hier_key(s->seed ^ UINT64_C(0x7674), (uint64_t)v, 0);
+            for (uint32_t e = start[v]; e < start[v + 1]; e++) {
+                const uint32_t i = inc[e];
+                const hier_node *lf = &s->nodes[i];
+                /* The evaluation point for this leaf's face. */
+                int xi = 0;
+                while (xi < nx && xface[xi] != lf->face)
+                    xi++;
+                if (xi == nx) {
+                    xi = nx < 32 ? nx++ : 31; /* (a vertex of more than 32 faces re-uses the last) */
+                    xface[xi] = lf->face;
+                    xs[xi] = rp_v3_madd(t->p[v], rp_v3_sub(lf->c, t->p[v]), 1e-3);
+                }
+                double dF = 0;
                 for (size_t b = 0; b < nb; b++)
-                    t->acc[(size_t)c[k] * nb + b] += nd->area * pv[(j * 4 + k) * nb + b];
+                    dg[b] = 0;
+                for (uint32_t a = i; a != RP_NONE; a = s->nodes[a].parent) {
+                    size_t at;
+                    int found = memo_find_or_add(&m, a, &at);
+                    if (found < 0) {
+#pragma omp atomic write
+                        ok = 0;
+                        break;
+                    }
+                    if (!found)
+                        node_changes(s, a, xs[xi], s->faces[lf->face].n, key, &nrays, &m.dF[at],
+                                     m.dg + at * nb);
+                    dF += m.dF[at];
+                    for (size_t b = 0; b < nb; b++)
+                        dg[b] += m.dg[at * nb + b];
+                }
+                leaf_value(s, i, dF, dg, val);
+                for (size_t b = 0; b < nb; b++)
+                    acc[b] += lf->area * val[b];
+            }
+        }
+        free(m.node);
+        free(m.dF);
+        free(m.dg);
     }
-    for (size_t v = 0; v < t->n; v++)
+    free(start);
+    free(inc);
+    free(leaf);
+    if (!ok)
+        return 0;
+    for (size_t v = 0; v < nv; v++)
         vtx_value(t, (uint32_t)v);
     hv->rays = nrays;
-    free(pv);
-    free(leaf);
     return 1;
 }
 
