@@ -213,6 +213,16 @@ static rp_scene *random_scene(gsl_rng *r, int ntri, int nquad)
     return text_parse(&t);
 }
 
+/* A generator seeded with seed, a random scene of 100 triangles and 100
+ * quads drawn from it, and its ray caster. */
+static rp_raycast *random_rc(unsigned long seed, gsl_rng **r, rp_scene **s)
+{
+    *r = gsl_rng_alloc(gsl_rng_mt19937);
+    gsl_rng_set(*r, seed);
+    *s = random_scene(*r, 100, 100);
+    return make_rc(*s, NULL);
+}
+
 Test(raycast, closest_hit_matches_brute_force)
 {
     gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
@@ -287,10 +297,9 @@ Test(raycast, closest_hit_matches_brute_force)
 
 Test(raycast, stream_matches_single_rays)
 {
-    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
-    gsl_rng_set(r, 777);
-    rp_scene *s = random_scene(r, 100, 100);
-    rp_raycast *rc = make_rc(s, NULL);
+    gsl_rng *r;
+    rp_scene *s;
+    rp_raycast *rc = random_rc(777, &r, &s);
     enum { N = 1000 }; /* not a multiple of the stream length */
     rp_vec3 *o = malloc(N * sizeof *o), *d = malloc(N * sizeof *d);
     rp_hit *hits = malloc(N * sizeof *hits);
@@ -326,10 +335,9 @@ Test(raycast, stream_matches_single_rays)
  * stream: the same faces and distances as one by one. */
 Test(raycast, coherent_stream_matches_single_rays)
 {
-    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
-    gsl_rng_set(r, 778);
-    rp_scene *s = random_scene(r, 100, 100);
-    rp_raycast *rc = make_rc(s, NULL);
+    gsl_rng *r;
+    rp_scene *s;
+    rp_raycast *rc = random_rc(778, &r, &s);
     enum { N = 37 * 23 }; /* rows of 37: not a multiple of the stream length */
     rp_vec3 eye = rp_v3(0.1, -0.2, -3.0);
     rp_vec3 *d = malloc(N * sizeof *d);
@@ -365,10 +373,9 @@ Test(raycast, coherent_stream_matches_single_rays)
  * (more than one stream block, some blocked and some open). */
 Test(raycast, occluded_stream_matches_single_rays)
 {
-    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
-    gsl_rng_set(r, 779);
-    rp_scene *s = random_scene(r, 100, 100);
-    rp_raycast *rc = make_rc(s, NULL);
+    gsl_rng *r;
+    rp_scene *s;
+    rp_raycast *rc = random_rc(779, &r, &s);
     enum { N = 150 };
     rp_vec3 a[N], b[N];
     unsigned char blocked[N];
@@ -644,10 +651,9 @@ Test(raycast, hits_name_their_element)
  * answers (the Embree scene is shared read-only). */
 Test(raycast, concurrent_queries_agree)
 {
-    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
-    gsl_rng_set(r, 4321);
-    rp_scene *s = random_scene(r, 100, 100);
-    rp_raycast *rc = make_rc(s, NULL);
+    gsl_rng *r;
+    rp_scene *s;
+    rp_raycast *rc = random_rc(4321, &r, &s);
     enum { N = 20000 };
     rp_vec3 *o = malloc(N * sizeof *o), *d = malloc(N * sizeof *d);
     rp_hit *serial = malloc(N * sizeof *serial), *par = malloc(N * sizeof *par);
