@@ -110,6 +110,9 @@ bench: deps
 	@$(MAKE) --no-print-directory radpt meshes
 	./radpt throughput scenes/cornell.scene --spp 64
 	./radpt samplers scenes/cornell.scene --spp 64 --seeds 3 --reference-spp 1024
+	mkdir -p out
+	./radpt bench scenes/cornell.scene --methods hierarchical:bf-epsilon=0.05:min-area=1e-4 \
+		--budget 0.46 --checkpoints 2 --seeds 1 -o out/bench-hierarchical
 
 # Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
 # for FUZZ_SECONDS; new corpus entries land in tests/fuzz/<target>/.

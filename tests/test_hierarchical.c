@@ -50,6 +50,7 @@
 #include "solvers/radiosity/hier_internal.h"
 #include "solvers/radiosity/hierarchical.h"
 #include "solvers/solver.h"
+#include "closed_form.h"
 #include "scene_util.h"
 
 extern const rp_solver_type rp_solver_pathtrace;
@@ -120,26 +121,17 @@ static void solve_hier(hrun *r, const rp_scene *scene, unsigned want, int thread
 
 /* ---- the contour kernel ------------------------------------------------ */
 
-/* Differential area to a parallel a x b rectangle at distance c, the
- * normal through a corner (Howell, B-3). */
-static double corner_rect(double a, double b, double c)
-{
-    double A = a / c, B = b / c;
-    return (A / sqrt(1 + A * A) * atan(B / sqrt(1 + A * A)) + B / sqrt(1 + B * B) * atan(A / sqrt(1 + B * B))) /
-           (2 * RP_PI);
-}
-
 Test(hier, contour_kernel, .init = hsetup)
 {
     /* Unit square centred 0.7 above the point: four corner rectangles. */
     rp_vec3 sq[4] = {{-0.5, -0.5, 0.7}, {-0.5, 0.5, 0.7}, {0.5, 0.5, 0.7}, {0.5, -0.5, 0.7}};
     double F = hier_point_polygon(rp_v3(0, 0, 0), rp_v3(0, 0, 1), sq, 4);
-    cr_assert_float_eq(F, 4 * corner_rect(0.5, 0.5, 0.7), 1e-13, "%.15g", F);
+    cr_assert_float_eq(F, 4 * rp_cf_corner_rect(0.5, 0.5, 0.7), 1e-13, "%.15g", F);
     /* Off-centre: the rectangle [0.2, 1.4] x [0.1, 0.6] at height 0.5 from
      * the origin, by superposition of corner rectangles. */
     rp_vec3 r[4] = {{0.2, 0.1, 0.5}, {1.4, 0.1, 0.5}, {1.4, 0.6, 0.5}, {0.2, 0.6, 0.5}};
-    double want = corner_rect(1.4, 0.6, 0.5) - corner_rect(0.2, 0.6, 0.5) - corner_rect(1.4, 0.1, 0.5) +
-                  corner_rect(0.2, 0.1, 0.5);
+    double want = rp_cf_corner_rect(1.4, 0.6, 0.5) - rp_cf_corner_rect(0.2, 0.6, 0.5) -
+                  rp_cf_corner_rect(1.4, 0.1, 0.5) + rp_cf_corner_rect(0.2, 0.1, 0.5);
     F = hier_point_polygon(rp_v3(0, 0, 0), rp_v3(0, 0, 1), r, 4);
     cr_assert_float_eq(F, want, 1e-13, "%.15g vs %.15g", F, want);
     /* Clipping: a square in the plane x = 1 from z = -1 to z = 1 is seen
@@ -453,7 +445,7 @@ Test(hier, gouraud_vertices_are_point_values, .init = hsetup)
     for (int k = 0; k < 4; k++) {
         /* By symmetry each corner sees the emitter as (0, 0) does. */
         double e = 0.5e-3, f = 1 - e;
-        double F = corner_rect(f, f, 1) + 2 * corner_rect(e, f, 1) + corner_rect(e, e, 1);
+        double F = rp_cf_corner_rect(f, f, 1) + 2 * rp_cf_corner_rect(e, f, 1) + rp_cf_corner_rect(e, e, 1);
         double want = 0.5 * RP_PI * 3 * F;
         rp_vec3 x = rp_v3(corner[k][0] + (corner[k][0] > 0 ? -e : e), corner[k][1] + (corner[k][1] > 0 ? -e : e), 0);
         double B;

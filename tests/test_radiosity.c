@@ -34,7 +34,10 @@
 #include <string.h>
 
 #include "geometry/mesh.h"
+#include "geometry/raycast.h"
+#include "geometry/sample.h"
 #include "geometry/scene.h"
+#include "closed_form.h"
 #include "scene_util.h"
 #include "solvers/radiosity/formfactor.h"
 #include "solvers/radiosity/reconstruct.h"
@@ -730,5 +733,58 @@ Test(radiosity, gouraud_corners_keep_creases)
     free(B);
     free(C);
     rp_mesh_destroy(mesh);
+    rp_scene_destroy(sc);
+}
+
+/* The final gather samples pure emitters directly (reconstruct.h).  A
+ * receiver (rho 1/2) under a parallel unit-square lamp (Le 3, reflecting
+ * nothing) at height 1, and a solution that is dark everywhere: at a point
+ * p of the receiver the gather must give L = rho Le F(p), F the point-to-
+ * rectangle form factor by superposition of Howell's B-3 corner
+ * rectangles.  64 independent keys of 64 light samples: the mean within 4
+ * standard errors, the standard error under 1% (so the test can fail). */
+static void dark_solution(const void *ctx, const rp_hit *g, double *B)
+{
+    (void)ctx;
+    (void)g;
+    B[0] = 0;
+}
+
+Test(radiosity, final_gather_samples_the_lamp)
+{
+    rp_scene *sc = rp_test_parse("bands grey\n"
+                                 "material floor reflect 0.5\n"
+                                 "material lamp reflect 0 emit 3\n"
+                                 "quad receiver floor  0 0 0  1 0 0  1 1 0  0 1 0\n"
+                                 "quad emitter lamp  0 0 1  0 1 1  1 1 1  1 0 1\n");
+    rp_error err = {""};
+    rp_raycast *rc = NULL;
+    rp_area_sampler *lights = NULL;
+    cr_assert_eq(rp_raycast_create(sc, NULL, &rc, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(rp_recon_lights(sc, &lights, &err), RP_OK, "%s", err.message);
+    cr_assert(lights);
+    enum { G = 64, KEYS = 64 };
+    rp_recon_gather g = {.scene = sc, .rc = rc, .lights = lights, .rays = G, .nb = 1,
+                         .radiosity = dark_solution, .ctx = NULL};
+    rp_hit h = {.p = rp_v3(0.3, 0.6, 0), .n = rp_v3(0, 0, 1), .face = 0, .surface = 0, .element = RP_NONE,
+                .front = 1};
+    double xy[2 * G], sum = 0, sum2 = 0;
+    uint32_t perm[G];
+    unsigned long long rays = 0;
+    for (int k = 0; k < KEYS; k++) {
+        double L;
+        rp_recon_final_gather(&g, &h, 1000 + (uint64_t)k, xy, perm, &L, &rays);
+        sum += L;
+        sum2 += L * L;
+    }
+    double mean = sum / KEYS, se = sqrt((sum2 / KEYS - mean * mean) / (KEYS - 1));
+    double F = rp_cf_corner_rect(0.3, 0.6, 1) + rp_cf_corner_rect(0.7, 0.6, 1) + rp_cf_corner_rect(0.3, 0.4, 1) +
+               rp_cf_corner_rect(0.7, 0.4, 1);
+    double want = 0.5 * 3 * F;
+    cr_log_info("final gather under the lamp: L %.6f +- %.6f, closed form %.6f (%llu rays)", mean, se, want, rays);
+    cr_assert_lt(se, 0.01 * want);
+    cr_assert_lt(fabs(mean - want), 4 * se + 1e-12, "%.6f vs %.6f +- %.6f", mean, want, se);
+    rp_area_sampler_destroy(lights);
+    rp_raycast_destroy(rc);
     rp_scene_destroy(sc);
 }

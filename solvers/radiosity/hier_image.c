@@ -21,9 +21,11 @@
  *            coarser edge (Baum, Mann, Smith & Winget 1991), so both sides
  *            of the edge interpolate the same line and the image has no
  *            shading cracks;
- *   gather   one bounce of final gathering (Reichert 1992): L = Le +
- *            rho/pi E(x), the irradiance E from cosine-distributed rays that
- *            each see the flat value of the leaf they hit.
+ *   gather   one bounce of final gathering (Reichert 1992; the uniform
+ *            solvers' rp_recon_final_gather): L = Le + rho/pi E(x), the
+ *            irradiance from the area lights sampled directly and from
+ *            cosine-distributed rays that see the flat value of the leaf
+ *            they hit.
  *
  * The backs of faces and misses are black. */
 #include <math.h>
@@ -575,6 +577,7 @@ void hier_vertices_eval(const hier_state *s, const hier_vertices *v, uint32_t fa
 typedef struct img_job {
     const hier_state *s;
     const hier_vertices *hv;
+    rp_recon_gather gather; /* (gather) */
 } img_job;
 
 static void shade(const void *ctx, const rp_hit *h, uint64_t key, double *xyg, uint32_t *perm, double *L,
@@ -600,35 +603,19 @@ static void shade(const void *ctx, const rp_hit *h, uint64_t key, double *xyg, u
         for (size_t b = 0; b < nb; b++)
             L[b] /= RP_PI;
         return;
-    case HIER_RECON_GATHER: {
-        /* E = int L_in cos dw ~ (pi / G) sum L_in = (1 / G) sum B_hit for
-         * cosine-distributed directions (pdf cos / pi). */
-        const hier_face *f = &s->faces[h->face];
-        const unsigned G = s->gather_rays;
-        double acc[HIER_MAX_BANDS];
-        for (size_t b = 0; b < nb; b++)
-            acc[b] = 0;
-        rp_recon_strata(key, G, perm, xyg);
-        rp_vec3 t, bt;
-        rp_v3_basis(h->n, &t, &bt);
-        for (unsigned k = 0; k < G; k++) {
-            double u1 = xyg[2 * k], u2 = xyg[2 * k + 1];
-            double r = sqrt(u1), phi = 2.0 * RP_PI * u2, c = sqrt(1.0 - u1);
-            rp_vec3 wi = rp_v3_madd(rp_v3_madd(rp_v3_scale(h->n, c), t, r * cos(phi)), bt, r * sin(phi));
-            rp_hit g;
-            (*rays)++;
-            if (!rp_ray_closest_from(s->rc, h->p, h->n, wi, &g) || !g.front)
-                continue;
-            double wg[4];
-            uint32_t lg = hier_locate(s, g.face, g.p, wg);
-            for (size_t b = 0; b < nb; b++)
-                acc[b] += s->B[(size_t)lg * nb + b];
-        }
-        for (size_t b = 0; b < nb; b++)
-            L[b] = f->Le[b] + f->rho[b] / RP_PI * acc[b] / G;
+    case HIER_RECON_GATHER:
+        rp_recon_final_gather(&j->gather, h, key, xyg, perm, L, rays);
         return;
     }
-    }
+}
+
+/* The solution at a gather ray's hit: the leaf's radiosity. */
+static void leaf_radiosity(const void *ctx, const rp_hit *g, double *B)
+{
+    const hier_state *s = ((const img_job *)ctx)->s;
+    double w[4];
+    uint32_t leaf = hier_locate(s, g->face, g->p, w);
+    memcpy(B, s->B + (size_t)leaf * s->nb, s->nb * sizeof *B);
 }
 
 rp_status hier_image(const hier_state *s, float *out, float *variance, double *rays, rp_error *err)
@@ -645,8 +632,16 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
         job.hv = hv;
         *rays += hv->rays;
     }
+    rp_area_sampler *lights = NULL;
+    if (s->recon == HIER_RECON_GATHER) {
+        if ((st = rp_recon_lights(s->scene, &lights, err)) != RP_OK)
+            return st;
+        job.gather = (rp_recon_gather){.scene = s->scene, .rc = s->rc, .lights = lights, .rays = s->gather_rays,
+                                       .nb = nb, .radiosity = leaf_radiosity, .ctx = &job};
+    }
     const rp_recon_shader shader = {shade, &job, s->recon == HIER_RECON_GATHER ? s->gather_rays : 1};
     st = rp_recon_camera(s->scene, s->rc, s->spp, s->seed, s->threads, nb, &shader, out, variance, rays, err);
     hier_vertices_destroy(hv);
+    rp_area_sampler_destroy(lights);
     return st;
 }

@@ -163,6 +163,81 @@ void rp_recon_strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
     }
 }
 
+/* A material that emits and reflects nothing: an area light. */
+static int pure_emitter(const rp_material *m, size_t nb)
+{
+    if (!m->emitter)
+        return 0;
+    for (size_t b = 0; b < nb; b++)
+        if (m->rho[b] > 0)
+            return 0;
+    return 1;
+}
+
+rp_status rp_recon_lights(const rp_scene *scene, rp_area_sampler **out, rp_error *err)
+{
+    *out = NULL;
+    const size_t nb = rp_scene_nbands(scene), nf = rp_scene_nfaces(scene);
+    int any = 0;
+    for (size_t f = 0; f < nf && !any; f++)
+        any = pure_emitter(rp_scene_face_material(scene, (uint32_t)f), nb);
+    if (!any)
+        return RP_OK;
+    return rp_area_sampler_create(scene, RP_NONE, RP_WEIGHT_POWER, out, err);
+}
+
+void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t key, double *xy, uint32_t *perm,
+                           double *L, unsigned long long *rays)
+{
+    const size_t nb = g->nb;
+    const unsigned G = g->rays;
+    const rp_material *m = rp_scene_face_material(g->scene, h->face);
+    double E[RECON_MAX_BANDS], Bh[RECON_MAX_BANDS]; /* irradiance */
+    for (size_t b = 0; b < nb; b++)
+        E[b] = 0;
+    rp_recon_strata(key, G, perm, xy);
+    rp_vec3 t, bt;
+    rp_v3_basis(h->n, &t, &bt);
+    for (unsigned k = 0; k < G; k++) {
+        double u1 = xy[2 * k], u2 = xy[2 * k + 1];
+        double r = sqrt(u1), phi = 2.0 * RP_PI * u2, c = sqrt(1.0 - u1);
+        rp_vec3 wi = rp_v3_madd(rp_v3_madd(rp_v3_scale(h->n, c), t, r * cos(phi)), bt, r * sin(phi));
+        rp_hit hit;
+        (*rays)++;
+        if (!rp_ray_closest_from(g->rc, h->p, h->n, wi, &hit) || !hit.front)
+            continue;
+        if (g->lights && pure_emitter(rp_scene_face_material(g->scene, hit.face), nb))
+            continue; /* sampled below */
+        g->radiosity(g->ctx, &hit, Bh);
+        for (size_t b = 0; b < nb; b++)
+            E[b] += Bh[b] / G;
+    }
+    if (g->lights) {
+        const uint64_t lkey = recon_mix(key ^ UINT64_C(0x6c69676874730a01));
+        rp_recon_strata(lkey, G, perm, xy);
+        for (unsigned k = 0; k < G; k++) {
+            rp_area_sample ls;
+            rp_area_sampler_sample(g->lights, recon_u01(lkey, 4 * (uint64_t)G + k), xy[2 * k], xy[2 * k + 1], &ls);
+            const rp_material *me = rp_scene_face_material(g->scene, ls.face);
+            if (!pure_emitter(me, nb) || !(ls.pdf_area > 0))
+                continue; /* an emitter that reflects is gathered above */
+            rp_vec3 d = rp_v3_sub(ls.p, h->p);
+            double r2 = rp_v3_dot(d, d), cx = rp_v3_dot(h->n, d), cy = -rp_v3_dot(ls.n, d);
+            if (!(cx > 0 && cy > 0 && r2 > 0))
+                continue;
+            (*rays)++;
+            if (rp_ray_occluded(g->rc, h->p, h->n, ls.p, ls.n))
+                continue;
+            /* Irradiance Le cos_x cos_y / r^2 over the area density. */
+            double w = cx * cy / (r2 * r2 * ls.pdf_area * G);
+            for (size_t b = 0; b < nb; b++)
+                E[b] += me->Le[b] * w;
+        }
+    }
+    for (size_t b = 0; b < nb; b++)
+        L[b] = m->Le[b] + m->rho[b] / RP_PI * E[b];
+}
+
 typedef struct recon_job {
     const rp_scene *scene;
     const rp_mesh *mesh;
@@ -172,7 +247,7 @@ typedef struct recon_job {
     size_t nb;
     const double *B;        /* elements x nb */
     const double *CB;       /* elements x 4 corners x nb (gouraud) */
-    const rp_material **elmat; /* per element */
+    rp_recon_gather gather; /* (gather) */
 } recon_job;
 
 /* Radiance leaving the front of the element hit towards the camera. */
@@ -202,33 +277,18 @@ static void recon_shade(const void *ctx, const rp_hit *h, uint64_t key, double *
             L[b] /= RP_PI;
         return;
     }
-    case RP_RECON_GATHER: {
-        /* L = Le + rho/pi E, E = int L_in cos dw ~ (pi/G) sum L_in =
-         * (1/G) sum B_hit for cosine-distributed directions (pdf cos/pi). */
-        const rp_material *m = j->elmat[e];
-        const unsigned G = j->p->gather_rays;
-        double acc[RECON_MAX_BANDS];
-        for (size_t b = 0; b < nb; b++)
-            acc[b] = 0;
-        rp_recon_strata(key, G, perm, xy_gather);
-        rp_vec3 t, bt;
-        rp_v3_basis(h->n, &t, &bt);
-        for (unsigned k = 0; k < G; k++) {
-            double u1 = xy_gather[2 * k], u2 = xy_gather[2 * k + 1];
-            double r = sqrt(u1), phi = 2.0 * RP_PI * u2, c = sqrt(1.0 - u1);
-            rp_vec3 wi = rp_v3_madd(rp_v3_madd(rp_v3_scale(h->n, c), t, r * cos(phi)), bt, r * sin(phi));
-            rp_hit g;
-            (*rays)++;
-            if (!rp_ray_closest_from(j->rc, h->p, h->n, wi, &g) || !g.front || g.element == RP_NONE)
-                continue;
-            for (size_t b = 0; b < nb; b++)
-                acc[b] += j->B[(size_t)g.element * nb + b];
-        }
-        for (size_t b = 0; b < nb; b++)
-            L[b] = m->Le[b] + m->rho[b] / RP_PI * acc[b] / G;
+    case RP_RECON_GATHER:
+        rp_recon_final_gather(&j->gather, h, key, xy_gather, perm, L, rays);
         return;
     }
-    }
+}
+
+/* The solution at a gather ray's hit: its element's radiosity. */
+static void element_radiosity(const void *ctx, const rp_hit *g, double *B)
+{
+    const recon_job *j = ctx;
+    for (size_t b = 0; b < j->nb; b++)
+        B[b] = g->element == RP_NONE ? 0 : j->B[(size_t)g->element * j->nb + b];
 }
 
 rp_status rp_recon_camera(const rp_scene *scene, const rp_raycast *rc, unsigned spp, uint64_t seed,
@@ -324,7 +384,7 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
     recon_job job = {.scene = scene, .mesh = mesh, .el = rp_mesh_elements(mesh), .rc = rc,
                      .p = p, .nb = nb, .B = B};
     double *CB = NULL;
-    const rp_material **elmat = NULL;
+    rp_area_sampler *lights = NULL;
     if (p->mode == RP_RECON_GOURAUD) {
         CB = malloc((n ? n : 1) * 4 * nb * sizeof *CB);
         if (!CB || !rp_recon_corners(mesh, nb, B, CB)) {
@@ -334,19 +394,15 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
         job.CB = CB;
     }
     if (p->mode == RP_RECON_GATHER) {
-        elmat = malloc((n ? n : 1) * sizeof *elmat);
-        if (!elmat)
-            return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
-        const rp_material *mats = rp_scene_materials(scene);
-        const rp_surface *surfs = rp_scene_surfaces(scene);
-        for (size_t e = 0; e < n; e++)
-            elmat[e] = &mats[surfs[job.el[e].surface].material];
-        job.elmat = elmat;
+        rp_status st = rp_recon_lights(scene, &lights, err);
+        if (st != RP_OK)
+            return st;
+        job.gather = (rp_recon_gather){.scene = scene, .rc = rc, .lights = lights, .rays = p->gather_rays,
+                                       .nb = nb, .radiosity = element_radiosity, .ctx = &job};
     }
-
     rp_recon_shader shader = {recon_shade, &job, p->mode == RP_RECON_GATHER ? p->gather_rays : 1};
     rp_status st = rp_recon_camera(scene, rc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
     free(CB);
-    free(elmat);
+    rp_area_sampler_destroy(lights);
     return st;
 }

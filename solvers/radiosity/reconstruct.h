@@ -8,13 +8,13 @@
  * reconstructed one of three ways (Cohen & Wallace 1993, ch. 9):
  *
  *   flat     B of the element hit;
- *   gouraud  B at the element's vertices (the area-weighted mean of the
- *            incident elements of the same surface), interpolated with
- *            rp_mesh_element_weights;
- *   gather   one bounce of final gathering: L = Le + rho/pi E(x), with the
- *            irradiance E(x) estimated from cosine-distributed rays, each
- *            seeing the flat B of the element it hits (E = pi * mean of
- *            L_in = mean of B_hit for cosine-weighted directions).
+ *   gouraud  B at the element's corners (the area-weighted mean of the
+ *            incident elements of the same surface and smoothing group,
+ *            rp_recon_corners), interpolated with rp_mesh_element_weights;
+ *   gather   one bounce of final gathering (rp_recon_final_gather): L = Le
+ *            + rho/pi E(x), the irradiance from the area lights sampled
+ *            directly and from cosine-distributed rays that see the flat B
+ *            of the element they hit.
  *
  * Backs of faces and misses are black.  Every pixel's value is a pure
  * function of (seed, pixel), so images are identical for any thread count. */
@@ -26,6 +26,7 @@
 
 #include "../../geometry/mesh.h"
 #include "../../geometry/raycast.h"
+#include "../../geometry/sample.h"
 #include "../../geometry/scene.h"
 
 typedef enum rp_recon_mode {
@@ -81,6 +82,38 @@ typedef struct rp_recon_shader {
 rp_status rp_recon_camera(const rp_scene *scene, const rp_raycast *rc, unsigned spp, uint64_t seed,
                           int threads, size_t nb, const rp_recon_shader *shader, float *out,
                           float *variance, double *rays, rp_error *err);
+
+/* The final gather (Reichert 1992) shared by the finite-element methods:
+ *
+ *     L(x) = Le + rho / pi (E_light + E_rest)
+ *
+ * E_rest from `rays` cosine-distributed rays, each seeing the solution's
+ * radiosity where it lands, E = pi / G sum L = 1 / G sum B (pdf cos / pi);
+ * E_light from as many points on the pure emitters (faces that emit and
+ * reflect nothing, the area lights), chosen by power through `lights`,
+ * Le cos cos / (r^2 pdf) each, with a shadow ray.  The cosine rays then
+ * leave pure emitters out: direct light from a small lamp is sampled where
+ * it is, not waited for.  A surface that emits and reflects is part of the
+ * solution and is gathered (so a furnace stays exact).  radiosity gives
+ * the method's B (nb values) at the front-facing hit g. */
+typedef struct rp_recon_gather {
+    const rp_scene *scene;
+    const rp_raycast *rc;
+    const rp_area_sampler *lights; /* emitters by power (rp_recon_lights), NULL: none */
+    unsigned rays;
+    size_t nb;
+    void (*radiosity)(const void *ctx, const rp_hit *g, double *B);
+    const void *ctx;
+} rp_recon_gather;
+
+/* L (nb) at the front of hit h; xy (2 x rays) and perm (rays) are scratch,
+ * key seeds the samples, *rays counts the rays cast. */
+void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t key, double *xy, uint32_t *perm,
+                           double *L, unsigned long long *rays);
+
+/* The light sampler for rp_recon_final_gather: every emitting face by
+ * power; *out is NULL when the scene has no pure emitter. */
+rp_status rp_recon_lights(const rp_scene *scene, rp_area_sampler **out, rp_error *err);
 
 /* Stratified positions of n samples in the unit square from key: a
  * jittered sqrt(n) x sqrt(n) grid when n is a square, otherwise n-rooks
