@@ -31,16 +31,6 @@ void rp_hash_text(const char *text, char out[17])
     snprintf(out, 17, "%016" PRIx64, h);
 }
 
-static int pure_emitter(const rp_material *m, size_t nb)
-{
-    if (!m->emitter)
-        return 0;
-    for (size_t b = 0; b < nb; b++)
-        if (m->rho[b] > 0)
-            return 0;
-    return 1;
-}
-
 /* ------------------------------------------------------------- furnace */
 
 /* Signed volume enclosed by the faces with their front normals taken as
@@ -150,7 +140,7 @@ static rp_status cast_mask(const rp_scene *scene, unsigned char *mask, unsigned 
                 rp_vec3 d = rp_camera_direction(&fr, x + (sx + 0.5) / MASK_SUB, y + (sy + 0.5) / MASK_SUB);
                 rp_hit hit;
                 if (rp_ray_closest(rc, fr.eye, d, INFINITY, &hit) && hit.front &&
-                    !pure_emitter(&mat[surf[hit.surface].material], nb))
+                    !rp_material_pure_emitter(&mat[surf[hit.surface].material], nb))
                     good++;
             }
         mask[i] = good == MASK_SUB * MASK_SUB;
@@ -310,7 +300,7 @@ static rp_reference *ref_alloc(const rp_scene *scene, rp_error *err)
     const rp_surface *surf = rp_scene_surfaces(scene);
     const rp_material *mat = rp_scene_materials(scene);
     for (size_t s = 0; s < r->nsurfaces; s++)
-        r->surface_mask[s] = !pure_emitter(&mat[surf[s].material], r->nbands);
+        r->surface_mask[s] = !rp_material_pure_emitter(&mat[surf[s].material], r->nbands);
     return r;
 }
 

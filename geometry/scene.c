@@ -1402,6 +1402,16 @@ const rp_material *rp_scene_face_material(const rp_scene *s, uint32_t face)
     return &s->materials[s->surfaces[s->faces[face].surface].material];
 }
 
+int rp_material_pure_emitter(const rp_material *m, size_t nb)
+{
+    if (!m->emitter)
+        return 0;
+    for (size_t b = 0; b < nb; b++)
+        if (m->rho[b] > 0)
+            return 0;
+    return 1;
+}
+
 const rp_camera *rp_scene_camera(const rp_scene *s) { return s->has_camera ? &s->camera : NULL; }
 
 uint32_t rp_scene_find_surface(const rp_scene *s, const char *name)

@@ -94,6 +94,9 @@ const rp_vec3 *rp_scene_vertices(const rp_scene *scene);
 /* The material of a face (shortcut through its surface). */
 const rp_material *rp_scene_face_material(const rp_scene *scene, uint32_t face);
 
+/* 1 if m emits and reflects nothing in any of its nb bands: an area light. */
+int rp_material_pure_emitter(const rp_material *m, size_t nb);
+
 /* NULL when the scene declares no camera. */
 const rp_camera *rp_scene_camera(const rp_scene *scene);
 

@@ -163,24 +163,13 @@ void rp_recon_strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
     }
 }
 
-/* A material that emits and reflects nothing: an area light. */
-static int pure_emitter(const rp_material *m, size_t nb)
-{
-    if (!m->emitter)
-        return 0;
-    for (size_t b = 0; b < nb; b++)
-        if (m->rho[b] > 0)
-            return 0;
-    return 1;
-}
-
 rp_status rp_recon_lights(const rp_scene *scene, rp_area_sampler **out, rp_error *err)
 {
     *out = NULL;
     const size_t nb = rp_scene_nbands(scene), nf = rp_scene_nfaces(scene);
     int any = 0;
     for (size_t f = 0; f < nf && !any; f++)
-        any = pure_emitter(rp_scene_face_material(scene, (uint32_t)f), nb);
+        any = rp_material_pure_emitter(rp_scene_face_material(scene, (uint32_t)f), nb);
     if (!any)
         return RP_OK;
     return rp_area_sampler_create(scene, RP_NONE, RP_WEIGHT_POWER, out, err);
@@ -206,7 +195,7 @@ void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t k
         (*rays)++;
         if (!rp_ray_closest_from(g->rc, h->p, h->n, wi, &hit) || !hit.front)
             continue;
-        if (g->lights && pure_emitter(rp_scene_face_material(g->scene, hit.face), nb))
+        if (g->lights && rp_material_pure_emitter(rp_scene_face_material(g->scene, hit.face), nb))
             continue; /* sampled below */
         g->radiosity(g->ctx, &hit, Bh);
         for (size_t b = 0; b < nb; b++)
@@ -219,7 +208,7 @@ void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t k
             rp_area_sample ls;
             rp_area_sampler_sample(g->lights, recon_u01(lkey, 4 * (uint64_t)G + k), xy[2 * k], xy[2 * k + 1], &ls);
             const rp_material *me = rp_scene_face_material(g->scene, ls.face);
-            if (!pure_emitter(me, nb) || !(ls.pdf_area > 0))
+            if (!rp_material_pure_emitter(me, nb) || !(ls.pdf_area > 0))
                 continue; /* an emitter that reflects is gathered above */
             rp_vec3 d = rp_v3_sub(ls.p, h->p);
             double r2 = rp_v3_dot(d, d), cx = rp_v3_dot(h->n, d), cy = -rp_v3_dot(ls.n, d);
