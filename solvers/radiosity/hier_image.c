@@ -13,7 +13,7 @@
  *   gouraud  interpolated from values at the leaves' corners (Cohen &
  *            Wallace 1993, sec. 9.2): at an ordinary vertex the radiosity
  *            at that point, gathered through the links of the leaves around
- *            it with point-to-polygon form factors (point_radiosity below;
+ *            it with point-to-polygon form factors (vtx_point_values below;
  *            the mean of leaf values would smear every gradient by half a
  *            leaf and every link's irradiance into a constant); at a
  *            T-vertex (one lying inside an edge of a coarser neighbouring
@@ -95,7 +95,6 @@ static uint64_t vtx_hash(uint32_t surface, rp_vec3 p)
 /* Faces of one surface share a vertex where their normals are within 30
  * degrees of the first face's at it (a smoothing group, RP_RECON_SMOOTH_COS
  * as for the uniform meshes' Gouraud images). */
-
 static int vtx_same(const vtx_table *t, uint32_t id, uint32_t surface, rp_vec3 p, rp_vec3 n)
 {
     return t->surface[id] == surface && t->p[id].x == p.x && t->p[id].y == p.y && t->p[id].z == p.z &&
@@ -293,24 +292,25 @@ static double point_visibility(const hier_state *s, rp_vec3 x, rp_vec3 n, const 
     return wsum > 0 ? wopen / wsum : 1;
 }
 
-/* Radiosity at point x of leaf i (Wallace, Elmquist & Haines 1989: vertex
- * radiosities from point-to-area form factors).  The leaf's own value has
- * each link's form factor as estimated for its receiver (the leaf or an
- * ancestor, at that node's centre) and, pushed down, is constant over the
- * leaf:
+/* Radiosity at a point x of a leaf (Wallace, Elmquist & Haines 1989:
+ * vertex radiosities from point-to-area form factors).  The leaf's own
+ * value has each link's form factor as estimated for its receiver (the
+ * leaf or an ancestor, at that node's centre) and, pushed down, is
+ * constant over the leaf:
  *
  *     B_i = pi Le + s_i (rho sum_links F_l B_l + C),
  *
  * C what clusters above hand down, s_i the enclosure's row-sum scale
- * (hierarchical.c).  At x each unoccluded link's form factor is replaced
- * by the exact point-to-polygon one, F_l(x), and s by 1 / (sum F_l(x) +
- * the rest of the leaf's row sum), so the light keeps the shape of the
- * kernel (the ramp of direct light under the ceiling, the fall into a
- * corner) below the size of the links.  Links whose visibility rays were
- * partly blocked, or whose elements cross each other's planes, keep their
- * constant estimate: their visible fraction is known only as a mean. */
-/* The changes one node's links make at x (normal n): dF += sum (F_l(x) -
- * F_l) and dg += sum (F_l(x) - F_l) B_l over the links node a receives. */
+ * (hierarchical.c).  At x each link's form factor is replaced by the exact
+ * point-to-polygon one, F_l(x) (times the visible fraction seen from x,
+ * point_visibility, for links whose rays were partly blocked), and s by
+ * 1 / (sum F_l(x) + the rest of the leaf's row sum), so the light keeps
+ * the shape of the kernel (the ramp of direct light under the ceiling, the
+ * fall into a corner) below the size of the links.  node_changes sums one
+ * node's part of the change, leaf_value applies it.
+ *
+ * node_changes: the changes node a's links make at x (normal n), dF +=
+ * sum (F_l(x) - F_l) and dg += sum (F_l(x) - F_l) B_l. */
 static void node_changes(const hier_state *s, uint32_t a, rp_vec3 x, rp_vec3 n, uint64_t key, double *rays,
                          double *dF, double *dg)
 {
