@@ -112,6 +112,15 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
     return ck && ck->path ? write_ckpt(ck, solver, tot, &excluded, err) : RP_OK;
 }
 
+/* What a method says about its set-up and its result (hierarchical
+ * radiosity's leaves and links, a uniform solver's mesh and matrix) goes
+ * to stderr, as progress does. */
+static void stderr_log(void *ctx, const char *message)
+{
+    (void)ctx;
+    fprintf(stderr, "radpt: %s\n", message);
+}
+
 static void fill_options(rp_options *o, const rp_cli *cli, unsigned want)
 {
     memset(o, 0, sizeof *o);
@@ -123,6 +132,7 @@ static void fill_options(rp_options *o, const rp_cli *cli, unsigned want)
     o->values = cli->values;
     o->count = cli->noptions;
     o->open_ended = cli->time_budget > 0;
+    o->log = stderr_log;
 }
 
 static void options_text(const rp_cli *cli, char *buf, size_t n)

@@ -215,3 +215,17 @@ Test(cli, command_catalogue)
     cr_expect(access("/tmp/radpt-bad.exr", F_OK) != 0, "no output file from a refused run");
     cr_expect(access("/tmp/radpt-bad-dir", F_OK) != 0, "no output directory from a refused run");
 }
+
+/* Hierarchical radiosity reports what SPLASH-2's radiosity does (issue 5):
+ * leaves, links split into fully visible, partial and invisible, and the
+ * equivalent uniform mesh, on stderr with the method's other messages. */
+Test(cli, hierarchical_reports_leaves_and_links)
+{
+    rp_run r = rp_run_radpt(
+        "probe scenes/cornell.scene --method hierarchical --bf-epsilon 0.3 --min-area 1e-3 --surface-averages");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    const char *want[] = {"leaves", "fully visible", "partial", "invisible", "equivalent uniform mesh", "initial links"};
+    for (size_t k = 0; k < sizeof want / sizeof *want; k++)
+        cr_expect(strstr(r.err, want[k]) != NULL, "stderr lacks '%s': %s", want[k], r.err);
+    rp_run_free(&r);
+}
