@@ -280,15 +280,24 @@ static void element_radiosity(const void *ctx, const rp_hit *g, double *B)
         B[b] = g->element == RP_NONE ? 0 : j->B[(size_t)g->element * j->nb + b];
 }
 
+/* An image needs a camera, and the shaders' per-band arrays room for nb. */
+static rp_status recon_check(const rp_scene *scene, size_t nb, rp_error *err)
+{
+    if (!rp_scene_camera(scene))
+        return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
+    if (nb == 0 || nb > RECON_MAX_BANDS)
+        return rp_error_set(err, RP_ERR_UNSUPPORTED, "%zu bands (at most %d)", nb, RECON_MAX_BANDS);
+    return RP_OK;
+}
+
 rp_status rp_recon_camera(const rp_scene *scene, const rp_raycast *rc, unsigned spp, uint64_t seed,
                           int threads, size_t nb, const rp_recon_shader *shader, float *out,
                           float *variance, double *rays, rp_error *err)
 {
+    rp_status cst = recon_check(scene, nb, err);
+    if (cst != RP_OK)
+        return cst;
     const rp_camera *cam = rp_scene_camera(scene);
-    if (!cam)
-        return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
-    if (nb == 0 || nb > RECON_MAX_BANDS)
-        return rp_error_set(err, RP_ERR_UNSUPPORTED, "%zu bands (at most %d)", nb, RECON_MAX_BANDS);
     if (spp == 0 || shader->samples == 0)
         return rp_error_set(err, RP_ERR_INPUT, "no camera or gather rays asked for");
     rp_camera_frame frame;
@@ -361,11 +370,9 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
                          const rp_recon_params *p, size_t nb, const double *B, float *out,
                          float *variance, double *rays, rp_error *err)
 {
-    const rp_camera *cam = rp_scene_camera(scene);
-    if (!cam)
-        return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
-    if (nb == 0 || nb > RECON_MAX_BANDS)
-        return rp_error_set(err, RP_ERR_UNSUPPORTED, "%zu bands (at most %d)", nb, RECON_MAX_BANDS);
+    rp_status st = recon_check(scene, nb, err);
+    if (st != RP_OK)
+        return st;
     if (p->spp == 0 || (p->mode == RP_RECON_GATHER && p->gather_rays == 0))
         return rp_error_set(err, RP_ERR_INPUT, "no camera or gather rays asked for");
 
@@ -383,14 +390,13 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
         job.CB = CB;
     }
     if (p->mode == RP_RECON_GATHER) {
-        rp_status st = rp_recon_lights(scene, &lights, err);
-        if (st != RP_OK)
+        if ((st = rp_recon_lights(scene, &lights, err)) != RP_OK)
             return st;
         job.gather = (rp_recon_gather){.scene = scene, .rc = rc, .lights = lights, .rays = p->gather_rays,
                                        .nb = nb, .radiosity = element_radiosity, .ctx = &job};
     }
     rp_recon_shader shader = {recon_shade, &job, p->mode == RP_RECON_GATHER ? p->gather_rays : 1};
-    rp_status st = rp_recon_camera(scene, rc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
+    st = rp_recon_camera(scene, rc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
     free(CB);
     rp_area_sampler_destroy(lights);
     return st;
