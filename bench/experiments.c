@@ -154,14 +154,18 @@ static rp_status exp_cornell(const rp_experiment_params *p, rp_error *err)
     /* the reference needs about 9 x the path tracer's samples for its
      * standard error to stay below a third of the error measured */
     unsigned long ref_spp = REF_SPP(p);
-    const char *list = p->quick ? "pathtrace:sampler=random,pathtrace,southwell:elements=150,southwell:elements=600"
+    const char *list = p->quick ? "pathtrace:sampler=random,pathtrace,southwell:elements=150,southwell:elements=600,"
+                                  "hierarchical:bf-epsilon=0.05:min-area=1e-4,stochastic-jacobi"
                                 : "pathtrace:sampler=random,pathtrace,southwell:elements=250,"
-                                  "southwell:elements=1000,gauss-seidel:elements=1000:reconstruct=gouraud";
+                                  "southwell:elements=1000,gauss-seidel:elements=1000:reconstruct=gouraud,"
+                                  "hierarchical,stochastic-jacobi";
     char preface[1600];
     snprintf(preface, sizeof preface,
              "Every method on the Cornell box at equal time (%g s per run): Monte Carlo path tracing "
-             "(next-event estimation with MIS, Russian roulette) against finite-element radiosity "
-             "(progressive refinement and Gauss-Seidel) at two mesh sizes. The path tracer runs twice: "
+             "(next-event estimation with MIS, Russian roulette) against finite-element radiosity: "
+             "progressive refinement and Gauss-Seidel at two mesh sizes, hierarchical radiosity (Hanrahan, "
+             "Salzman & Aupperle 1991, Gouraud images from vertex values gathered through its links) and "
+             "Monte Carlo radiosity (stochastic Jacobi). The path tracer runs twice: "
              "with independent random numbers (`sampler=random`, plain Monte Carlo, whose error falls as "
              "N^-1/2: slope -0.5) and with its default Owen-scrambled Sobol' points, which converge "
              "somewhat faster where the integrand is smooth (see `radpt experiment samplers`). A "
