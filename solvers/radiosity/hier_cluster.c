@@ -457,15 +457,7 @@ static double clink_eval(const hier_state *s, uint32_t r, uint32_t src, double *
     const unsigned N = s->cluster_rays;
     uint64_t key = hier_key(s->seed ^ CL_SEED, r, src);
     uint32_t perm[256];
-    for (unsigned k = 0; k < N; k++)
-        perm[k] = k;
-    for (unsigned k = N; k > 1; k--) {
-        unsigned j = (unsigned)(hier_u01(key, 6 * (uint64_t)N + k) * k);
-        j = j < k ? j : k - 1;
-        uint32_t t = perm[k - 1];
-        perm[k - 1] = perm[j];
-        perm[j] = t;
-    }
+    hier_shuffle(perm, N, key, 6 * (uint64_t)N);
     double sum = 0;
     for (unsigned k = 0; k < N; k++) {
         uint32_t fa, fb;

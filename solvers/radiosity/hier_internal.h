@@ -320,6 +320,21 @@ static inline double hier_u01(uint64_t key, uint64_t d)
     return (double)(hier_mix(key + (d + 1) * UINT64_C(0x9e3779b97f4a7c15)) >> 11) * 0x1.0p-53;
 }
 
+/* A random permutation of 0..n-1 (Fisher-Yates), drawing dimensions
+ * dim0 + 2 .. dim0 + n of key: it pairs the strata on two elements. */
+static inline void hier_shuffle(uint32_t *perm, unsigned n, uint64_t key, uint64_t dim0)
+{
+    for (unsigned k = 0; k < n; k++)
+        perm[k] = k;
+    for (unsigned k = n; k > 1; k--) {
+        unsigned j = (unsigned)(hier_u01(key, dim0 + k) * k);
+        j = j < k ? j : k - 1;
+        uint32_t t = perm[k - 1];
+        perm[k - 1] = perm[j];
+        perm[j] = t;
+    }
+}
+
 /* Growable scratch arrays: room for need items of size bytes in *a
  * (capacity *cap, doubling from 1024); 0 when out of memory. */
 int hier_grow(void **a, size_t *cap, size_t need, size_t size);

@@ -259,15 +259,7 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
         unsigned m = (unsigned)floor(sqrt((double)s->vis_rays) + 0.5), N = m * m;
         uint64_t key = hier_key(s->seed, qi, pi);
         uint32_t perm[64];
-        for (unsigned k = 0; k < N; k++)
-            perm[k] = k;
-        for (unsigned k = N; k > 1; k--) {
-            unsigned j = (unsigned)(hier_u01(key, 4 * (uint64_t)N + k) * k);
-            j = j < k ? j : k - 1;
-            uint32_t t = perm[k - 1];
-            perm[k - 1] = perm[j];
-            perm[j] = t;
-        }
+        hier_shuffle(perm, N, key, 4 * (uint64_t)N);
         unsigned valid = 0, open = 0;
         double wsum = 0, wopen = 0, w[64];
         rp_vec3 a[64], b[64];
