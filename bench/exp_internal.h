@@ -20,7 +20,14 @@ void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
 #endif
     ;
 
+/* Writes DIR/plots.gp from body (after the shared chart preamble) and runs
+ * gnuplot on it; a missing gnuplot is a note (nn chars), not a failure. */
+rp_status rp_exp_draw(const rp_experiment_params *p, const char *body, char *note, size_t nn, rp_error *err);
+
 /* radpt experiment stability (exp_stability.c). */
 rp_status rp_exp_stability(const rp_experiment_params *p, rp_error *err);
+
+/* radpt experiment realscenes (exp_realscenes.c). */
+rp_status rp_exp_realscenes(const rp_experiment_params *p, rp_error *err);
 
 #endif

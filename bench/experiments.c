@@ -213,7 +213,7 @@ static rp_status exp_samplers(const rp_experiment_params *p, rp_error *err)
 
 /* Writes DIR/plots.gp from body (after the shared preamble) and runs it;
  * a missing gnuplot is a note, not a failure. */
-static rp_status draw(const rp_experiment_params *p, const char *body, char *note, size_t nn, rp_error *err)
+rp_status rp_exp_draw(const rp_experiment_params *p, const char *body, char *note, size_t nn, rp_error *err)
 {
     char path[1024];
     rp_out o;
@@ -443,7 +443,7 @@ static rp_status exp_furnace(const rp_experiment_params *p, rp_error *err)
                      "'furnace.dat' index 0 using 1:4 with lines dt 2 lw 2 lc rgb '#555555' "
                      "title 'Jacobi theory: ln(tol) / ln(rho) - 1'\n"
                      "@SVG\nset output 'furnace_sweeps.svg'\nreplot\nunset output\n");
-        st = draw(p, body, note, sizeof note, err);
+        st = rp_exp_draw(p, body, note, sizeof note, err);
     }
     if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "report.md"), err)) == RP_OK) {
         FILE *f = o.f;
@@ -718,7 +718,7 @@ static rp_status exp_formfactors(const rp_experiment_params *p, rp_error *err)
             "'' index 7 using 1:3 with linespoints lw 2 pt 7 title 'montecarlo (256 samples)', "
             "'' index 8 using 1:3 with linespoints lw 2 pt 7 title 'hemicube (256)'\n"
             "@SVG\nset output 'ff_distance.svg'\nreplot\nunset output\n";
-        st = draw(p, body, note, sizeof note, err);
+        st = rp_exp_draw(p, body, note, sizeof note, err);
     }
     if (st == RP_OK && (st = rp_out_open(&csv, rp_path_join(path, sizeof path, p->out_dir, "report.md"), err)) == RP_OK) {
         FILE *f = csv.f;
@@ -855,7 +855,7 @@ static rp_status exp_meshing(const rp_experiment_params *p, rp_error *err)
             "'' using 3:5 every ::1 with linespoints lw 2 pt 7 title 'image RMSE, gouraud (W sr^-1 m^-2)', "
             "'' using 3:6 every ::1 with linespoints lw 2 pt 7 title 'surface-average relative error'\n"
             "@SVG\nset output 'meshing.svg'\nreplot\nunset output\nset datafile separator whitespace\n";
-        st = draw(p, body, note, sizeof note, err);
+        st = rp_exp_draw(p, body, note, sizeof note, err);
     }
     if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "report.md"), err)) == RP_OK) {
         FILE *f = o.f;
@@ -1210,11 +1210,13 @@ static const rp_experiment experiments[] = {
                   "shrinks (when registered)", exp_hierarchy},
     {"stability", "the stability atlas: each method pushed past its comfort zone (reflectance near 1, tiny lights, "
                   "corners, contact, shadows, thin geometry, non-physical input)", rp_exp_stability},
+    {"realscenes", "published OBJ/MTL scenes and scanned meshes: every method against the path tracer per "
+                   "surface, time and memory", rp_exp_realscenes},
 };
 
 static const rp_experiment *const experiment_list[] = {&experiments[0], &experiments[1], &experiments[2],
                                                        &experiments[3], &experiments[4], &experiments[5],
-                                                       &experiments[6], &experiments[7], NULL};
+                                                       &experiments[6], &experiments[7], &experiments[8], NULL};
 
 const rp_experiment *const *rp_experiments(void) { return experiment_list; }
 
