@@ -22,6 +22,7 @@
 #include "cli.h"
 #include "experiments.h"
 #include "harness.h"
+#include "image.h"
 #include "plot.h"
 #include "reference.h"
 
@@ -117,6 +118,19 @@ static int parse_positive(const rp_cli *cli, const char *name, double *out)
         return 2;
     }
     *out = x;
+    return 0;
+}
+
+/* --exposure EV (image.h) for the PNGs a command writes; 0 when absent. */
+static int parse_exposure(const rp_cli *cli, rp_exposure *out)
+{
+    *out = rp_exposure_fixed(0);
+    const char *v = rp_cli_extra(cli, "exposure");
+    rp_error e;
+    if (v && rp_exposure_parse(v, out, &e) != RP_OK) {
+        fprintf(stderr, "radpt %s: %s (see radpt help)\n", cli->command, e.message);
+        return 2;
+    }
     return 0;
 }
 
@@ -248,7 +262,7 @@ int rp_cmd_reference(int argc, char **argv)
 int rp_cmd_bench(int argc, char **argv)
 {
     static const char *const extra[] = {"methods", "budget", "seeds", "checkpoints", "target", "cache",
-                                        "reference-spp", "reference-samples", NULL};
+                                        "reference-spp", "reference-samples", "exposure", NULL};
     static const char *const flags[] = {"--surfaces", NULL};
     int found[1] = {0};
     char **av = calloc((size_t)argc + 1, sizeof *av);
@@ -271,6 +285,9 @@ int rp_cmd_bench(int argc, char **argv)
         rc = parse_positive(&cli, "budget", &budget);
     if (!rc)
         rc = parse_positive(&cli, "target", &target);
+    rp_exposure exposure;
+    if (!rc)
+        rc = parse_exposure(&cli, &exposure);
     if (!rc && cli.time_budget > 0)
         budget = cli.time_budget; /* --time works as --budget */
     if (!rc && !cli.out) {
@@ -322,7 +339,8 @@ int rp_cmd_bench(int argc, char **argv)
     if (st == RP_OK) {
         char cmd[2048], note[256];
         command_line(argc, argv, cmd, sizeof cmd);
-        rp_bench_output out = {.size = sizeof out, .sheet = 1, .command = cmd};
+        rp_bench_output out = {.size = sizeof out, .sheet = 1, .command = cmd,
+                               .exposure = rp_cli_extra(&cli, "exposure") ? &exposure : NULL};
         st = rp_bench_write(bench, cli.out, &out, note, &err);
         if (st == RP_OK) {
             if (note[0])
@@ -345,7 +363,7 @@ int rp_cmd_bench(int argc, char **argv)
 
 int rp_cmd_experiment(int argc, char **argv)
 {
-    static const char *const extra[] = {"budget", "seeds", "cache", "scenes", NULL};
+    static const char *const extra[] = {"budget", "seeds", "cache", "scenes", "exposure", NULL};
     static const char *const flags[] = {"--quick", NULL};
     int found[1] = {0};
     char **av = calloc((size_t)argc + 1, sizeof *av);
@@ -360,6 +378,9 @@ int rp_cmd_experiment(int argc, char **argv)
         rc = parse_ulong(&cli, "seeds", 1, 1000, &seeds);
     if (!rc)
         rc = parse_positive(&cli, "budget", &budget);
+    rp_exposure exposure;
+    if (!rc)
+        rc = parse_exposure(&cli, &exposure);
     const rp_experiment *e = NULL;
     if (!rc) {
         e = rp_experiment_lookup(cli.scene);
@@ -385,7 +406,8 @@ int rp_cmd_experiment(int argc, char **argv)
     rp_experiment_params p = {.size = sizeof p, .quick = found[0], .out_dir = cli.out,
                               .cache_dir = rp_cli_extra(&cli, "cache"), .scenes_dir = rp_cli_extra(&cli, "scenes"),
                               .threads = cli.threads, .budget = budget, .nseeds = (unsigned)seeds, .command = cmd,
-                              .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr};
+                              .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr,
+                              .exposure = rp_cli_extra(&cli, "exposure") ? &exposure : NULL};
     rp_error err;
     rp_error_clear(&err);
     fprintf(stderr, "experiment %s%s: %s\n", e->name, p.quick ? " (quick)" : "", e->summary);

@@ -212,11 +212,21 @@ static rp_status planes_make(const rp_scene *scene, const float *radiance, size_
 
 int rp_cmd_render(int argc, char **argv)
 {
-    static const char *const extra[] = {"checkpoint", "checkpoint-every", "resume", NULL};
+    static const char *const extra[] = {"checkpoint", "checkpoint-every", "resume", "exposure", NULL};
     rp_cli cli = {.command = "render"};
     int rc = rp_cli_parse(&cli, argc, argv, extra, 1);
     if (rc)
         return rc;
+    rp_exposure exposure = rp_exposure_fixed(0); /* --exposure EV, else automatic */
+    const char *ev_text = rp_cli_extra(&cli, "exposure");
+    if (ev_text) {
+        rp_error e;
+        if (rp_exposure_parse(ev_text, &exposure, &e) != RP_OK || !cli.png) {
+            fprintf(stderr, "radpt render: %s (see radpt help)\n",
+                    cli.png ? e.message : "--exposure needs --png OUT.png");
+            return 2;
+        }
+    }
     if (!cli.out) {
         fprintf(stderr, "radpt render: needs -o OUT.exr (see radpt help)\n");
         return 2;
@@ -344,11 +354,15 @@ int rp_cmd_render(int argc, char **argv)
         goto done;
     if (cli.png) {
         size_t r = planes.nchannels >= 3 ? planes.nchannels - 3 : 0;
-        st = rp_image_write_png(cli.png, cam->width, cam->height, planes.planes[r],
-                                planes.planes[planes.nchannels >= 3 ? r + 1 : 0],
-                                planes.planes[planes.nchannels >= 3 ? r + 2 : 0], 1.0, &err);
-        if (st != RP_OK)
+        const float *pr = planes.planes[r], *pg = planes.planes[planes.nchannels >= 3 ? r + 1 : 0],
+                    *pb = planes.planes[planes.nchannels >= 3 ? r + 2 : 0];
+        if (!ev_text && (st = rp_exposure_auto(npix, pr, pg, pb, &exposure, &err)) != RP_OK)
             goto done;
+        if ((st = rp_image_write_png(cli.png, cam->width, cam->height, pr, pg, pb, &exposure, &err)) != RP_OK)
+            goto done;
+        char note[160];
+        rp_exposure_describe(&exposure, note, sizeof note);
+        fprintf(stderr, "radpt: %s: exposure %s\n", cli.png, note);
     }
     printf("wrote %s: %u x %u, %s, %.17g samples, %.3f s", cli.out, cam->width, cam->height,
            cli.method, est.samples, tot.seconds);

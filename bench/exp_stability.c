@@ -103,13 +103,15 @@ static rp_status stab_plot(stab *S, const char *name, const char *body, rp_error
     return RP_OK;
 }
 
-/* A grey image as an sRGB PNG, scaled so that `white` maps to 1. */
+/* A grey image as an sRGB PNG, scaled so that `white` maps to 1 (the
+ * images of one family share it, so they compare), or by --exposure. */
 static rp_status stab_png(stab *S, const char *name, const float *img, uint32_t w, uint32_t h, double white,
                           rp_error *err)
 {
     char path[1200];
+    rp_exposure ex = rp_exposure_fixed(white > 0 && isfinite(white) ? -log2(white) : 0);
     return rp_image_write_png(out_path(S, path, sizeof path, name), w, h, img, img, img,
-                              white > 0 ? 1.0 / white : 1.0, err);
+                              S->p->exposure ? S->p->exposure : &ex, err);
 }
 
 /* One solver run to its own rule, a step count, a time budget or (exact >

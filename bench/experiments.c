@@ -106,7 +106,10 @@ static rp_status run_bench_scheduled(const rp_experiment_params *p, const rp_sce
     }
     if (st == RP_OK) {
         char note[256];
-        st = rp_bench_write(b, dir, out, note, err);
+        rp_bench_output o = *out;
+        if (!o.exposure)
+            o.exposure = p->exposure;
+        st = rp_bench_write(b, dir, &o, note, err);
         if (st == RP_OK && note[0])
             rp_exp_log(p, "%s", note);
     }

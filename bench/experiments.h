@@ -11,6 +11,7 @@
 
 #include "../geometry/status.h"
 #include "../solvers/solver.h"
+#include "image.h"
 #include "reference.h"
 
 typedef struct rp_experiment_params {
@@ -27,6 +28,7 @@ typedef struct rp_experiment_params {
     void *log_ctx;
     rp_progress_fn progress;
     void *progress_ctx;
+    const rp_exposure *exposure; /* --exposure for the PNGs; NULL: each chooses */
 } rp_experiment_params;
 
 typedef struct rp_experiment {

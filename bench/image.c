@@ -565,6 +565,109 @@ char *rp_image_read_exr_attr(const char *path, const char *name)
 }
 
 /* ---------------------------------------------------------------------
+ * Exposure */
+
+rp_exposure rp_exposure_fixed(double ev)
+{
+    return (rp_exposure){.ev = ev, .scale = exp2(ev), .automatic = 0, .anchor = 0};
+}
+
+rp_status rp_exposure_parse(const char *text, rp_exposure *out, rp_error *err)
+{
+    char *end = NULL;
+    double ev = text ? strtod(text, &end) : NAN;
+    if (!text || end == text || *end || !isfinite(ev) || fabs(ev) > 100)
+        return rp_error_set(err, RP_ERR_INPUT, "--exposure: '%s' is not a number of stops in [-100, 100]",
+                            text ? text : "");
+    *out = rp_exposure_fixed(ev);
+    return RP_OK;
+}
+
+/* The k-th smallest (0-based) of v[0..n-1] (no NaN), reordering v: Hoare's
+ * FIND (quickselect) with a median-of-three pivot and a three-way
+ * partition (Dijkstra), so runs of equal values cost nothing; expected
+ * O(n). */
+static double select_kth(double *v, size_t n, size_t k)
+{
+    size_t lo = 0, hi = n - 1;
+    while (lo < hi) {
+        double a = v[lo], b = v[lo + (hi - lo) / 2], c = v[hi];
+        double pivot = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
+        /* v[lo..lt-1] < pivot, v[lt..i-1] == pivot, v[gt+1..hi] > pivot;
+         * a value equal to the pivot stays at or below gt, so gt >= lt. */
+        size_t lt = lo, i = lo, gt = hi;
+        while (i <= gt) {
+            double t = v[i];
+            if (t < pivot) {
+                v[i++] = v[lt];
+                v[lt++] = t;
+            } else if (t > pivot) {
+                v[i] = v[gt];
+                v[gt] = t;
+                if (gt == lt)
+                    break;
+                gt--;
+            } else {
+                i++;
+            }
+        }
+        if (k < lt)
+            hi = lt - 1;
+        else if (k > gt)
+            lo = gt + 1;
+        else
+            return pivot;
+    }
+    return v[k];
+}
+
+rp_status rp_exposure_auto(size_t npix, const float *r, const float *g, const float *b, rp_exposure *out,
+                           rp_error *err)
+{
+    *out = rp_exposure_fixed(0);
+    out->automatic = 1;
+    if (npix == 0)
+        return RP_OK;
+    double *y = malloc(npix * sizeof *y);
+    if (!y)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory for the exposure of a %zu-pixel image", npix);
+    size_t n = 0;
+    for (size_t i = 0; i < npix; i++) {
+        /* ITU-R BT.709 luminance of linear RGB; a grey pixel is its value
+         * exactly (the weights' sum rounds to 1 only nearly). */
+        double Y = r[i] == g[i] && g[i] == b[i] ? (double)r[i]
+                                                 : 0.2126 * r[i] + 0.7152 * g[i] + 0.0722 * b[i];
+        if (isfinite(Y) && Y > 0)
+            y[n++] = Y;
+    }
+    if (n > 0) {
+        /* Nearest rank: the ceil(p n)-th smallest value. */
+        size_t rank = (size_t)ceil(RP_EXPOSURE_PERCENTILE * (double)n);
+        rank = rank < 1 ? 1 : (rank > n ? n : rank);
+        double y99 = select_kth(y, n, rank - 1);
+        double scale = RP_EXPOSURE_WHITE / y99;
+        if (isfinite(scale) && scale > 0) {
+            out->scale = scale;
+            out->ev = log2(scale);
+            out->anchor = y99;
+        }
+    }
+    free(y);
+    return RP_OK;
+}
+
+void rp_exposure_describe(const rp_exposure *e, char *buf, size_t n)
+{
+    if (!e->automatic)
+        snprintf(buf, n, "EV %.6g (scale %.6g), fixed", e->ev, e->scale);
+    else if (e->anchor > 0)
+        snprintf(buf, n, "EV %.6g (scale %.6g), automatic: %gth-percentile luminance %.6g -> %g", e->ev,
+                 e->scale, 100 * RP_EXPOSURE_PERCENTILE, e->anchor, RP_EXPOSURE_WHITE);
+    else
+        snprintf(buf, n, "EV %.6g (scale %.6g), automatic: no lit pixel", e->ev, e->scale);
+}
+
+/* ---------------------------------------------------------------------
  * PNG preview */
 
 /* Linear value to an 8-bit sRGB code: IEC 61966-2-1 transfer function,
@@ -603,7 +706,7 @@ static void png_ignore_warning(png_structp png, png_const_charp msg)
 /* Everything that touches libpng after setjmp, kept in one function so no
  * local of the caller changes between setjmp and a longjmp. */
 static int png_encode(png_structp png, png_infop info, FILE *fp, uint32_t width, uint32_t height,
-                      const float *r, const float *g, const float *b, double exposure,
+                      const float *r, const float *g, const float *b, double scale, const char *note,
                       unsigned char *row)
 {
     if (setjmp(png_jmpbuf(png)))
@@ -613,13 +716,18 @@ static int png_encode(png_structp png, png_infop info, FILE *fp, uint32_t width,
                  PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
     /* Tag the file as sRGB (with matching gAMA/cHRM for older readers). */
     png_set_sRGB_gAMA_and_cHRM(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
+    /* The exposure used, so a preview says how bright it was made. */
+    png_text text = {.compression = PNG_TEXT_COMPRESSION_NONE,
+                     .key = (png_charp) "radpt:exposure",
+                     .text = (png_charp)note};
+    png_set_text(png, info, &text, 1);
     png_write_info(png, info);
     for (uint32_t y = 0; y < height; y++) {
         size_t base = (size_t)y * width;
         for (uint32_t x = 0; x < width; x++) {
-            row[3 * (size_t)x + 0] = srgb_encode8(exposure * (double)r[base + x]);
-            row[3 * (size_t)x + 1] = srgb_encode8(exposure * (double)g[base + x]);
-            row[3 * (size_t)x + 2] = srgb_encode8(exposure * (double)b[base + x]);
+            row[3 * (size_t)x + 0] = srgb_encode8(scale * (double)r[base + x]);
+            row[3 * (size_t)x + 1] = srgb_encode8(scale * (double)g[base + x]);
+            row[3 * (size_t)x + 2] = srgb_encode8(scale * (double)b[base + x]);
         }
         png_write_row(png, row);
     }
@@ -629,7 +737,7 @@ static int png_encode(png_structp png, png_infop info, FILE *fp, uint32_t width,
 
 rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
                              const float *r, const float *g, const float *b,
-                             double exposure, rp_error *err)
+                             const rp_exposure *exposure, rp_error *err)
 {
     if (!path || !*path)
         return rp_error_set(err, RP_ERR_INPUT, "PNG output: no file name");
@@ -640,9 +748,19 @@ rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
     if (width == 0 || height == 0 || width > 1000000 || height > 1000000)
         return rp_error_set(err, RP_ERR_INPUT, "%s: image size %u x %u out of range", path, width,
                             height);
-    if (!isfinite(exposure) || exposure < 0.0)
-        return rp_error_set(err, RP_ERR_INPUT, "%s: exposure %g is not a finite value >= 0", path,
-                            exposure);
+    rp_exposure ex;
+    if (exposure) {
+        ex = *exposure;
+        if (!isfinite(ex.scale) || !(ex.scale > 0.0))
+            return rp_error_set(err, RP_ERR_INPUT, "%s: exposure scale %g is not a finite value > 0", path,
+                                ex.scale);
+    } else {
+        rp_status est = rp_exposure_auto((size_t)width * height, r, g, b, &ex, err);
+        if (est != RP_OK)
+            return est;
+    }
+    char note[160];
+    rp_exposure_describe(&ex, note, sizeof note);
 
     unsigned char *row = malloc(3 * (size_t)width);
     if (!row)
@@ -673,7 +791,7 @@ rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
     png_infop info = png ? png_create_info_struct(png) : NULL;
     int rc = -1;
     if (png && info)
-        rc = png_encode(png, info, fp, width, height, r, g, b, exposure, row);
+        rc = png_encode(png, info, fp, width, height, r, g, b, ex.scale, note, row);
     else
         snprintf(cap.message, sizeof cap.message, "cannot create libpng structures");
     png_destroy_write_struct(png ? &png : NULL, info ? &info : NULL);

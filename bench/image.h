@@ -39,10 +39,49 @@ rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
 /* Reads one string attribute; returns a malloc'd copy or NULL. */
 char *rp_image_read_exr_attr(const char *path, const char *name);
 
-/* A preview: linear RGB (3 planes) scaled by exposure, then the sRGB
- * transfer curve, 8 bits per channel. */
+/* The exposure of a PNG preview: linear radiance is multiplied by scale
+ * (2^ev, ev in stops) before the sRGB transfer curve. */
+typedef struct rp_exposure {
+    double ev;      /* stops: scale = 2^ev */
+    double scale;   /* the linear multiplier */
+    int automatic;  /* 1: chosen from the image by rp_exposure_auto */
+    double anchor;  /* automatic: the image's 99th-percentile luminance
+                       (0: no pixel with a finite luminance > 0) */
+} rp_exposure;
+
+/* The automatic exposure maps the RP_EXPOSURE_PERCENTILE quantile of the
+ * pixels' luminance to RP_EXPOSURE_WHITE (before the sRGB curve), so a few
+ * bright pixels (a lamp) clip and the rest of the image is seen. */
+#define RP_EXPOSURE_PERCENTILE 0.99
+#define RP_EXPOSURE_WHITE 0.9
+
+/* A fixed exposure of ev stops (scale 2^ev). */
+rp_exposure rp_exposure_fixed(double ev);
+
+/* Parses an --exposure value: a finite number of stops in [-100, 100];
+ * the message names the value and says what is wrong. */
+rp_status rp_exposure_parse(const char *text, rp_exposure *out, rp_error *err);
+
+/* The automatic exposure of linear RGB planes (npix values each): Y the
+ * Rec. 709 luminance 0.2126 R + 0.7152 G + 0.0722 B (R for a grey pixel,
+ * R = G = B); over the pixels whose Y is finite and > 0, the
+ * nearest-rank 99th percentile Y99 (the ceil(0.99 n)-th smallest of n)
+ * maps to 0.9: scale = 0.9 / Y99.  Without such a pixel (an all-black
+ * image) the scale is 1 (ev 0), so black stays black.  RP_ERR_NOMEM when
+ * scratch memory runs out. */
+rp_status rp_exposure_auto(size_t npix, const float *r, const float *g, const float *b, rp_exposure *out,
+                           rp_error *err);
+
+/* "EV 3.16993 (scale 9), automatic: 99th-percentile luminance 0.1 -> 0.9" or
+ * "EV 2 (scale 4), fixed"; the text radpt prints and stores in PNGs. */
+void rp_exposure_describe(const rp_exposure *e, char *buf, size_t n);
+
+/* A preview: linear RGB (3 planes) multiplied by the exposure's scale,
+ * then the sRGB transfer curve (IEC 61966-2-1), 8 bits per channel.
+ * exposure NULL: rp_exposure_auto of these planes.  The exposure used is
+ * stored as a tEXt chunk "radpt:exposure" (rp_exposure_describe). */
 rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
                              const float *r, const float *g, const float *b,
-                             double exposure, rp_error *err);
+                             const rp_exposure *exposure, rp_error *err);
 
 #endif

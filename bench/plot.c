@@ -698,8 +698,8 @@ static void sheet_tile(sheet *s, uint32_t x0, uint32_t y0, uint32_t w, uint32_t 
 
 /* Reference and each method's final image (first seed) on the top row,
  * per-pixel error maps below; returns the scale of the error maps. */
-static rp_status write_sheet(const rp_bench *b, const char *dir, double *err_scale, size_t *ncols_out,
-                             double *exposure_out, rp_error *err)
+static rp_status write_sheet(const rp_bench *b, const char *dir, const rp_exposure *fixed, double *err_scale,
+                             size_t *ncols_out, rp_exposure *exposure_out, rp_error *err)
 {
     const rp_reference *ref = b->ref;
     *err_scale = NAN;
@@ -723,17 +723,6 @@ static rp_status write_sheet(const rp_bench *b, const char *dir, double *err_sca
                     worst_mae = mae;
                 break;
             }
-    /* exposure: the mean measured reference radiance maps to 0.4 */
-    double mean = 0;
-    size_t cnt = 0;
-    for (size_t i = 0; i < npix; i++)
-        if (ref->mask[i])
-            for (size_t k = 0; k < nb; k++) {
-                mean += ref->radiance[i * nb + k];
-                cnt++;
-            }
-    mean = cnt ? mean / (double)cnt : 1;
-    double exposure = mean > 0 ? 0.4 / mean : 1;
     /* error maps: 0 .. 3 x the largest final MAE */
     double scale = worst_mae > 0 ? 3 * worst_mae : 1;
     sheet s = {.w = (uint32_t)(ncols * (w + gap) + gap), .h = 2 * (h + gap) + gap};
@@ -745,6 +734,14 @@ static rp_status write_sheet(const rp_bench *b, const char *dir, double *err_sca
     rp_status st = RP_OK;
     if (!s.r || !s.g || !s.b || !tr || !emap)
         st = rp_error_set(err, RP_ERR_NOMEM, "out of memory for the image sheet");
+    /* One exposure for the whole sheet, so the images compare: --exposure,
+     * else the reference's automatic one (image.h). */
+    rp_exposure ex = fixed ? *fixed : rp_exposure_fixed(0);
+    if (st == RP_OK && !fixed) {
+        rp_image_to_rgb(b->scene, ref->radiance, npix, tr, tr + npix, tr + 2 * npix);
+        st = rp_exposure_auto(npix, tr, tr + npix, tr + 2 * npix, &ex, err);
+    }
+    const double exposure = ex.scale;
     if (st == RP_OK) {
         /* mid grey background, in linear units once exposure is applied */
         float bg = (float)(0.2 / exposure);
@@ -780,7 +777,7 @@ static rp_status write_sheet(const rp_bench *b, const char *dir, double *err_sca
                 s.b[d] = (float)(rgb[2] / exposure);
             }
         char path[1024];
-        st = rp_image_write_png(rp_path_join(path, sizeof path, dir, "sheet.png"), s.w, s.h, s.r, s.g, s.b, exposure,
+        st = rp_image_write_png(rp_path_join(path, sizeof path, dir, "sheet.png"), s.w, s.h, s.r, s.g, s.b, &ex,
                                 err);
     }
     free(s.r);
@@ -791,7 +788,7 @@ static rp_status write_sheet(const rp_bench *b, const char *dir, double *err_sca
     free(imgs);
     *err_scale = scale;
     *ncols_out = ncols;
-    *exposure_out = exposure;
+    *exposure_out = ex;
     return st;
 }
 
@@ -824,7 +821,8 @@ static void md_fit(FILE *f, const rp_fit *fit)
 }
 
 static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench_output *opt, const char *plots_note,
-                              int charts, double err_scale, size_t sheet_cols, rp_error *err)
+                              int charts, double err_scale, size_t sheet_cols, const rp_exposure *exposure,
+                              rp_error *err)
 {
     char path[1024];
     rp_out o;
@@ -987,10 +985,13 @@ static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench
                     fprintf(f, " %zu. `%s`", c++, b->methods[mi].text);
                     break;
                 }
-        fprintf(f, ". Bottom row: per-pixel absolute error against the reference (mean over bands), colour ramp "
+        char ev[160];
+        rp_exposure_describe(exposure, ev, sizeof ev);
+        fprintf(f, ". One exposure for the whole top row (%s%s), so the images compare. Bottom row: per-pixel "
+                   "absolute error against the reference (mean over bands), colour ramp "
                    "from 0 (dark blue) to %.3g W sr^-1 m^-2 (yellow; 3 × the largest final MAE) as drawn under the "
                    "reference; near-black pixels are not measured.\n",
-                err_scale);
+                ev, exposure->automatic ? ", from the reference" : " by --exposure", err_scale);
     }
 
     /* per checkpoint */
@@ -1055,14 +1056,15 @@ rp_status rp_bench_write(const rp_bench *b, const char *dir, const rp_bench_outp
         if (!charts)
             snprintf(plots_note, sizeof plots_note, "charts not drawn: %.200s", gerr.message);
     }
-    double scale = NAN, exposure = 1;
+    double scale = NAN;
+    rp_exposure exposure = rp_exposure_fixed(0);
     size_t cols = 0;
     if (st == RP_OK && (!opt || opt->sheet))
-        st = write_sheet(b, dir, &scale, &cols, &exposure, err);
+        st = write_sheet(b, dir, opt ? opt->exposure : NULL, &scale, &cols, &exposure, err);
     if (st == RP_OK)
         st = write_summary_json(b, dir, plots_note, err);
     if (st == RP_OK)
-        st = write_report(b, dir, opt, plots_note, charts, scale, cols, err);
+        st = write_report(b, dir, opt, plots_note, charts, scale, cols, &exposure, err);
     if (note)
         snprintf(note, 256, "%s", plots_note);
     return st;

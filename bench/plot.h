@@ -13,6 +13,7 @@
 
 #include "../geometry/status.h"
 #include "harness.h"
+#include "image.h"
 
 /* mkdir -p. */
 rp_status rp_mkdirs(const char *path, rp_error *err);
@@ -63,6 +64,7 @@ typedef struct rp_bench_output {
     const char *samples_label; /* its x label (NULL: "samples per pixel") */
     int sheet;              /* draw the image sheet (needs kept images) */
     const char *command;    /* the command line, for the report */
+    const rp_exposure *exposure; /* the sheet's (--exposure); NULL: automatic, from the reference */
 } rp_bench_output;
 
 /* Writes DIR/runs.csv, DIR/summary.json, DIR/data/, DIR/plots.gp, the

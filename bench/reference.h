@@ -22,7 +22,9 @@
  * surfaces that reflect light; pixels that see a pure emitter (Le > 0,
  * rho = 0 in every band: its radiance is Le for every method), the
  * background or a back face in any of 4 x 4 sub-pixel rays are left out.
- * Surfaces measured: every surface that is not a pure emitter. */
+ * A surface that emits and reflects is measured: what it reflects differs
+ * between methods.  Surfaces measured: every surface that is not a pure
+ * emitter. */
 #ifndef RP_REFERENCE_H
 #define RP_REFERENCE_H
 

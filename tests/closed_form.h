@@ -9,4 +9,13 @@
  * superposition. */
 double rp_cf_corner_rect(double a, double b, double c);
 
+/* B-3 by superposition: from a point (x, y) of the plane z = 0 (normal +z)
+ * to the parallel rectangle [0, a] x [0, b] at height c, the point's
+ * projection inside it. */
+double rp_cf_point_rect(double x, double y, double a, double b, double c);
+
+/* rp_cf_point_rect averaged over the square [x0, x1] x [y0, y1] of the
+ * plane (a pixel's footprint), by 8 x 8-point Gauss-Legendre (GSL). */
+double rp_cf_point_rect_mean(double x0, double x1, double y0, double y1, double a, double b, double c);
+
 #endif

@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include "bench/image.h"
+#include "cli_util.h"
 
 /* ---------------------------------------------------------------------
  * Helpers */
@@ -476,7 +477,10 @@ Test(image, png_srgb_values)
     const float g[8] = {0.25f, 0.0031308f, 0.04f, INFINITY, -INFINITY, 0.9f, 0.5f, 1e-30f};
     const float b[8] = {0.0f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f, 0.5f};
     rp_error err = {{0}};
-    cr_assert_eq(rp_image_write_png(path, 4, 2, r, g, b, 1.0, &err), RP_OK, "%s", err.message);
+    const rp_exposure ev0 = rp_exposure_fixed(0), ev1 = rp_exposure_fixed(1);
+    cr_assert_float_eq(ev0.scale, 1.0, 0);
+    cr_assert_float_eq(ev1.scale, 2.0, 0);
+    cr_assert_eq(rp_image_write_png(path, 4, 2, r, g, b, &ev0, &err), RP_OK, "%s", err.message);
 
     uint32_t w = 0, h = 0;
     unsigned char *px = read_png_rgb(path, &w, &h);
@@ -501,8 +505,8 @@ Test(image, png_srgb_values)
     free(px);
     cr_assert(file_contains(path, "sRGB"), "no sRGB chunk");
 
-    /* Exposure scales before the curve: 0.25 * 2 = 0.5 -> 188. */
-    cr_assert_eq(rp_image_write_png(path, 4, 2, g, g, g, 2.0, &err), RP_OK, "%s", err.message);
+    /* Exposure scales before the curve: EV 1, 0.25 * 2 = 0.5 -> 188. */
+    cr_assert_eq(rp_image_write_png(path, 4, 2, g, g, g, &ev1, &err), RP_OK, "%s", err.message);
     px = read_png_rgb(path, &w, &h);
     cr_assert_eq(px[0], 188);
     cr_assert_eq(px[1], 188);
@@ -528,7 +532,8 @@ Test(image, png_odd_size_grey)
     for (size_t i = 0; i < (size_t)W * H; i++)
         y[i] = (float)i / (float)(W * H - 1); /* ramp 0..1 */
     rp_error err = {{0}};
-    cr_assert_eq(rp_image_write_png(path, W, H, y, y, y, 1.0, &err), RP_OK, "%s", err.message);
+    const rp_exposure ev0 = rp_exposure_fixed(0);
+    cr_assert_eq(rp_image_write_png(path, W, H, y, y, y, &ev0, &err), RP_OK, "%s", err.message);
     uint32_t w = 0, h = 0;
     unsigned char *px = read_png_rgb(path, &w, &h);
     cr_assert_eq(w, W);
@@ -554,17 +559,18 @@ Test(image, png_failures_leave_nothing)
     char *path = join(sub, "p.png");
     const float v[1] = {0.5f};
     rp_error err = {{0}};
-    cr_assert_eq(rp_image_write_png(path, 1, 1, v, v, v, 1.0, &err), RP_ERR_RUNTIME);
+    const rp_exposure ev0 = rp_exposure_fixed(0), bad = {.ev = NAN, .scale = NAN};
+    cr_assert_eq(rp_image_write_png(path, 1, 1, v, v, v, &ev0, &err), RP_ERR_RUNTIME);
     cr_assert_not_null(strstr(err.message, path), "message: %s", err.message);
     cr_assert(!path_exists(path));
 
     char *ok = join(dir, "p.png");
-    cr_assert_eq(rp_image_write_png(ok, 1, 1, v, v, v, NAN, &err), RP_ERR_INPUT);
-    cr_assert_eq(rp_image_write_png(ok, 0, 1, v, v, v, 1.0, &err), RP_ERR_INPUT);
-    cr_assert_eq(rp_image_write_png(ok, 1, 1, v, NULL, v, 1.0, &err), RP_ERR_INPUT);
+    cr_assert_eq(rp_image_write_png(ok, 1, 1, v, v, v, &bad, &err), RP_ERR_INPUT);
+    cr_assert_eq(rp_image_write_png(ok, 0, 1, v, v, v, &ev0, &err), RP_ERR_INPUT);
+    cr_assert_eq(rp_image_write_png(ok, 1, 1, v, NULL, v, &ev0, &err), RP_ERR_INPUT);
     /* The target is a directory: the write succeeds, the rename fails. */
     cr_assert_eq(mkdir(ok, 0700), 0);
-    cr_assert_eq(rp_image_write_png(ok, 1, 1, v, v, v, 1.0, &err), RP_ERR_RUNTIME);
+    cr_assert_eq(rp_image_write_png(ok, 1, 1, v, v, v, &ev0, &err), RP_ERR_RUNTIME);
     int temps = -1;
     cr_assert_eq(count_entries(dir, &temps), 1);
     cr_assert_eq(temps, 0);
@@ -572,4 +578,359 @@ Test(image, png_failures_leave_nothing)
     free(path);
     free(sub);
     remove_dir(dir);
+}
+
+/* ---------------------------------------------------------------------
+ * Exposure (image.h): the 99th-percentile luminance maps to 0.9 */
+
+/* The tEXt value stored under key, read back with libpng (malloc'd), or
+ * NULL. */
+static char *read_png_text(const char *path, const char *key)
+{
+    FILE *f = fopen(path, "rb");
+    cr_assert_not_null(f, "%s: %s", path, strerror(errno));
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    cr_assert(png && info);
+    char *found = NULL;
+    if (setjmp(png_jmpbuf(png)) == 0) {
+        png_init_io(png, f);
+        png_read_info(png, info);
+        png_textp text = NULL;
+        int n = 0;
+        png_get_text(png, info, &text, &n);
+        for (int i = 0; i < n && !found; i++)
+            if (strcmp(text[i].key, key) == 0)
+                found = strdup(text[i].text);
+    }
+    png_destroy_read_struct(&png, &info, NULL);
+    fclose(f);
+    return found;
+}
+
+/* The scale a stored "EV e (scale s), ..." text gives, NAN if none. */
+static double text_scale(const char *text)
+{
+    double ev, scale;
+    if (!text || sscanf(text, "EV %lf (scale %lf)", &ev, &scale) != 2)
+        return NAN;
+    return scale;
+}
+
+/* 15 x 15 grey pixels: the values 1 .. 200 in a scrambled order, 20 zeros,
+ * 2 NaN, 2 +inf and one -3.  Ignoring the zeros, the non-finite and the
+ * negative, 200 values are left; the nearest-rank 99th percentile is the
+ * ceil(0.99 * 200) = 198th smallest, 198, so scale = 0.9 / 198. */
+Test(image, png_auto_exposure_is_the_99th_percentile)
+{
+    enum { W = 15, H = 15, N = W * H };
+    float v[N];
+    size_t k = 0;
+    for (int i = 0; i < 200; i++)
+        v[k++] = (float)((i * 77) % 200 + 1); /* 77 is prime to 200: a permutation */
+    for (int i = 0; i < 20; i++)
+        v[k++] = 0.0f;
+    v[k++] = NAN;
+    v[k++] = INFINITY;
+    v[k++] = -3.0f;
+    v[k++] = NAN;
+    v[k++] = INFINITY;
+    cr_assert_eq(k, (size_t)N);
+    /* move the odd pixels around so they are not all at the end */
+    for (size_t i = 0; i < N; i += 7) {
+        float t = v[i];
+        v[i] = v[N - 1 - i / 7];
+        v[N - 1 - i / 7] = t;
+    }
+    rp_error err = {{0}};
+    rp_exposure ex;
+    cr_assert_eq(rp_exposure_auto(N, v, v, v, &ex, &err), RP_OK, "%s", err.message);
+    cr_assert(ex.automatic);
+    cr_assert_float_eq(ex.anchor, 198.0, 0);
+    cr_assert_float_eq(ex.scale, 0.9 / 198.0, 0);
+    cr_assert_float_eq(ex.ev, log2(0.9 / 198.0), 1e-12);
+
+    /* The PNG with exposure NULL (automatic) against the sRGB formula. */
+    char *dir = make_dir();
+    char *path = join(dir, "auto.png");
+    cr_assert_eq(rp_image_write_png(path, W, H, v, v, v, NULL, &err), RP_OK, "%s", err.message);
+    uint32_t w = 0, h = 0;
+    unsigned char *px = read_png_rgb(path, &w, &h);
+    cr_assert_eq(w, W);
+    cr_assert_eq(h, H);
+    int saw198 = 0;
+    for (size_t i = 0; i < N; i++) {
+        int want = srgb_ref(0.9 / 198.0 * (double)v[i]);
+        cr_assert_eq(px[3 * i], want, "pixel %zu (%g): %d, want %d", i, v[i], px[3 * i], want);
+        cr_assert_eq(px[3 * i + 1], want);
+        cr_assert_eq(px[3 * i + 2], want);
+        if (v[i] == 198.0f) {
+            /* 0.9 -> 1.055 * 0.9^(1/2.4) - 0.055 = 0.95469, * 255 = 243.45 */
+            cr_assert_eq(px[3 * i], 243);
+            saw198 = 1;
+        }
+        if (v[i] == 200.0f) /* 0.90909 -> 0.95892, * 255 = 244.53 */
+            cr_assert_eq(px[3 * i], 245);
+    }
+    cr_assert(saw198);
+    free(px);
+    char *text = read_png_text(path, "radpt:exposure");
+    cr_assert_not_null(text, "no radpt:exposure tEXt chunk");
+    cr_assert_not_null(strstr(text, "automatic"), "%s", text);
+    cr_assert_float_eq(text_scale(text), 0.9 / 198.0, 1e-6 * 0.9 / 198.0, "%s", text);
+    free(text);
+    free(path);
+    remove_dir(dir);
+}
+
+/* Colour: the percentile is of the Rec. 709 luminance, not of a channel.
+ * 100 red pixels R = 1 .. 100 (Y = 0.2126 R) and 100 blue ones B = 1 ..
+ * 100 (Y = 0.0722 B): the 99th percentile of the 200 luminances is the
+ * 198th smallest, 0.2126 * 98 (the largest blue Y, 7.22, is below the
+ * red 0.2126 * 34 = 7.23); a per-channel maximum would pick 99 or 100. */
+Test(image, png_auto_exposure_uses_luminance)
+{
+    enum { N = 200 };
+    float r[N] = {0}, g[N] = {0}, b[N] = {0};
+    for (int i = 0; i < 100; i++) {
+        r[2 * i] = (float)(i + 1);
+        b[2 * i + 1] = (float)(100 - i);
+    }
+    rp_error err = {{0}};
+    rp_exposure ex;
+    cr_assert_eq(rp_exposure_auto(N, r, g, b, &ex, &err), RP_OK, "%s", err.message);
+    double y98 = 0.2126 * 98.0;
+    cr_assert_float_eq(ex.anchor, y98, 1e-12 * y98);
+    cr_assert_float_eq(ex.scale, 0.9 / y98, 1e-12);
+
+    char *dir = make_dir();
+    char *path = join(dir, "rgb.png");
+    cr_assert_eq(rp_image_write_png(path, 20, 10, r, g, b, &ex, &err), RP_OK, "%s", err.message);
+    uint32_t w = 0, h = 0;
+    unsigned char *px = read_png_rgb(path, &w, &h);
+    for (size_t i = 0; i < N; i++) {
+        cr_assert_eq(px[3 * i], srgb_ref(ex.scale * r[i]), "pixel %zu red", i);
+        cr_assert_eq(px[3 * i + 1], 0);
+        cr_assert_eq(px[3 * i + 2], srgb_ref(ex.scale * b[i]), "pixel %zu blue", i);
+    }
+    free(px);
+    free(path);
+    remove_dir(dir);
+}
+
+/* An all-black image (zeros, NaN, negative) stays black: scale 1, EV 0,
+ * every code 0, no NaN anywhere. */
+Test(image, png_auto_exposure_black_image)
+{
+    const float v[6] = {0.0f, 0.0f, NAN, -1.0f, -0.0f, 0.0f};
+    rp_error err = {{0}};
+    rp_exposure ex;
+    cr_assert_eq(rp_exposure_auto(6, v, v, v, &ex, &err), RP_OK, "%s", err.message);
+    cr_assert_float_eq(ex.scale, 1.0, 0);
+    cr_assert_float_eq(ex.ev, 0.0, 0);
+    cr_assert_float_eq(ex.anchor, 0.0, 0);
+    char *dir = make_dir();
+    char *path = join(dir, "black.png");
+    cr_assert_eq(rp_image_write_png(path, 3, 2, v, v, v, NULL, &err), RP_OK, "%s", err.message);
+    uint32_t w = 0, h = 0;
+    unsigned char *px = read_png_rgb(path, &w, &h);
+    for (int i = 0; i < 18; i++)
+        cr_assert_eq(px[i], 0, "byte %d", i);
+    free(px);
+    char *text = read_png_text(path, "radpt:exposure");
+    cr_assert_not_null(text);
+    cr_assert_float_eq(text_scale(text), 1.0, 0, "%s", text);
+    cr_assert_null(strstr(text, "nan"), "%s", text);
+    free(text);
+    free(path);
+    remove_dir(dir);
+}
+
+/* The percentile against a sort, on large images with many ties (the
+ * selection is a quickselect, image.c): 20 pseudo-random images of up to
+ * 5000 values drawn from few levels. */
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+Test(image, png_auto_exposure_matches_a_sort)
+{
+    enum { NMAX = 5000 };
+    float *v = malloc(NMAX * sizeof *v);
+    double *sorted = malloc(NMAX * sizeof *sorted);
+    cr_assert(v && sorted);
+    uint64_t state = 12345;
+    for (int trial = 0; trial < 20; trial++) {
+        size_t n = 1 + (size_t)(trial * 263) % NMAX, m = 0;
+        unsigned levels = 1 + (unsigned)trial * 3;
+        for (size_t i = 0; i < n; i++) {
+            state = state * UINT64_C(6364136223846793005) + UINT64_C(1442695040888963407);
+            unsigned l = (unsigned)(state >> 33) % (levels + 1); /* level 0: a zero pixel */
+            v[i] = (float)l * 0.37f;
+            if (l > 0)
+                sorted[m++] = v[i];
+        }
+        rp_error err = {{0}};
+        rp_exposure ex;
+        cr_assert_eq(rp_exposure_auto(n, v, v, v, &ex, &err), RP_OK, "%s", err.message);
+        if (m == 0) {
+            cr_assert_float_eq(ex.scale, 1.0, 0);
+            continue;
+        }
+        qsort(sorted, m, sizeof *sorted, cmp_double);
+        size_t rank = (size_t)ceil(0.99 * (double)m);
+        cr_assert_float_eq(ex.anchor, sorted[rank - 1], 0, "trial %d: n %zu, %zu lit", trial, n, m);
+    }
+    free(v);
+    free(sorted);
+}
+
+Test(image, exposure_parse)
+{
+    rp_error err = {{0}};
+    rp_exposure ex;
+    cr_assert_eq(rp_exposure_parse("-1.5", &ex, &err), RP_OK, "%s", err.message);
+    cr_assert_float_eq(ex.scale, 1.0 / sqrt(8.0), 1e-15);
+    cr_assert(!ex.automatic);
+    cr_assert_eq(rp_exposure_parse("3", &ex, &err), RP_OK);
+    cr_assert_float_eq(ex.scale, 8.0, 0);
+    const char *bad[] = {"", "x", "1e9", "nan", "inf", "2 stops", "-101"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        cr_assert_eq(rp_exposure_parse(bad[i], &ex, &err), RP_ERR_INPUT, "'%s' accepted", bad[i]);
+        cr_assert_not_null(strstr(err.message, "--exposure"), "%s", err.message);
+    }
+}
+
+/* ---------------------------------------------------------------------
+ * The PNGs radpt writes */
+
+/* render --png: with no --exposure the preview is the EXR's radiance
+ * times 0.9 / Y99, Y99 the nearest-rank 99th percentile of the lit pixels
+ * computed here with a sort; --exposure -1 halves the radiance; the
+ * exposure is on stderr and in the PNG. */
+Test(image, render_png_exposure, .timeout = 60)
+{
+    char *dir = make_dir();
+    char *exr = join(dir, "f.exr"), *png = join(dir, "f.png");
+    char args[1024];
+    snprintf(args, sizeof args,
+             "render scenes/cube-ceiling.scene --method pathtrace --spp 2 --seed 3 -o %s --png %s", exr, png);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_assert_not_null(strstr(r.err, "exposure EV"), "stderr: %s", r.err);
+    cr_assert_not_null(strstr(r.err, "automatic"), "stderr: %s", r.err);
+    rp_run_free(&r);
+
+    uint32_t W = 0, H = 0;
+    size_t nc = 0;
+    char **names = NULL;
+    float **planes = NULL;
+    rp_error err = {{0}};
+    cr_assert_eq(rp_image_read_exr(exr, &W, &H, &nc, &names, &planes, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(nc, 1u);
+    cr_assert_str_eq(names[0], "Y");
+    const float *y = planes[0];
+    size_t npix = (size_t)W * H, m = 0;
+    double *lit = malloc(npix * sizeof *lit);
+    cr_assert_not_null(lit);
+    for (size_t i = 0; i < npix; i++)
+        if (isfinite(y[i]) && y[i] > 0)
+            lit[m++] = y[i];
+    cr_assert_gt(m, npix / 2);
+    qsort(lit, m, sizeof *lit, cmp_double);
+    double scale = 0.9 / lit[(size_t)ceil(0.99 * (double)m) - 1];
+
+    uint32_t w = 0, h = 0;
+    unsigned char *px = read_png_rgb(png, &w, &h);
+    cr_assert_eq(w, W);
+    cr_assert_eq(h, H);
+    size_t bright = 0;
+    for (size_t i = 0; i < npix; i++) {
+        cr_assert_eq(px[3 * i], srgb_ref(scale * y[i]), "pixel %zu: %g", i, y[i]);
+        bright += px[3 * i] > 128;
+    }
+    cr_assert_gt(bright, npix / 10, "only %zu of %zu pixels brighter than mid-grey", bright, npix);
+    free(px);
+    char *text = read_png_text(png, "radpt:exposure");
+    cr_assert_float_eq(text_scale(text), scale, 1e-5 * scale, "%s", text);
+    free(text);
+
+    snprintf(args, sizeof args,
+             "render scenes/cube-ceiling.scene --method pathtrace --spp 2 --seed 3 -o %s --png %s --exposure -1",
+             exr, png);
+    r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_assert_not_null(strstr(r.err, "fixed"), "stderr: %s", r.err);
+    rp_run_free(&r);
+    px = read_png_rgb(png, &w, &h);
+    for (size_t i = 0; i < npix; i++)
+        cr_assert_eq(px[3 * i], srgb_ref(0.5 * y[i]), "pixel %zu: %g", i, y[i]);
+    free(px);
+
+    /* bad values, and --exposure without a PNG, are usage errors */
+    const char *bad[] = {"--png %s --exposure bright", "--png %s --exposure nan", "--exposure 1"};
+    for (size_t k = 0; k < 3; k++) {
+        char tail[512];
+        snprintf(tail, sizeof tail, bad[k], png);
+        snprintf(args, sizeof args, "render scenes/cube-ceiling.scene --method pathtrace --spp 1 -o %s %s", exr,
+                 tail);
+        r = rp_run_radpt(args);
+        cr_expect_eq(r.status, 2, "%s: stderr %s", tail, r.err);
+        cr_expect_not_null(strstr(r.err, "--exposure"), "%s: stderr %s", tail, r.err);
+        rp_run_free(&r);
+    }
+    for (size_t c = 0; c < nc; c++) {
+        free(names[c]);
+        free(planes[c]);
+    }
+    free(names);
+    free(planes);
+    free(lit);
+    free(exr);
+    free(png);
+    remove_dir(dir);
+}
+
+/* bench's image sheet: one exposure for every image on it, the automatic
+ * one of the reference (the furnace's exact reference is L = 2 at every
+ * pixel, so 0.9 / 2), or --exposure.  The reference tile's pixels must be
+ * the sRGB code of 0.45 * 2 = 0.9 (243), then of 2^-2 * 2 = 0.5 (188). */
+static void sheet_case(const char *extra, double scale, int code)
+{
+    char *dir = make_dir();
+    char args[1024];
+    snprintf(args, sizeof args,
+             "bench scenes/furnace.scene --methods jacobi:elements=24 --budget 0.1 --checkpoints 1 --seeds 1 "
+             "--cache %s -o %s/b %s",
+             dir, dir, extra);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    rp_run_free(&r);
+    char *sheet = join(dir, "b/sheet.png");
+    char *text = read_png_text(sheet, "radpt:exposure");
+    cr_assert_float_eq(text_scale(text), scale, 1e-6 * scale, "%s", text);
+    uint32_t w = 0, h = 0;
+    unsigned char *px = read_png_rgb(sheet, &w, &h);
+    /* the sheet has a 4-pixel margin; the reference is the first tile */
+    cr_assert_gt(w, 2 * 128u);
+    for (uint32_t y = 4; y < 4 + 128; y += 9)
+        for (uint32_t x = 4; x < 4 + 128; x += 7)
+            cr_assert_eq(px[3 * ((size_t)y * w + x)], code, "(%u, %u)", x, y);
+    free(px);
+    free(text);
+    free(sheet);
+    char cmd[1100];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    cr_assert_eq(system(cmd), 0);
+    free(dir);
+}
+
+Test(image, bench_sheet_one_exposure, .timeout = 60)
+{
+    cr_assert_eq(srgb_ref(0.9), 243);
+    cr_assert_eq(srgb_ref(0.5), 188);
+    sheet_case("", 0.45, 243);
+    sheet_case("--exposure -2", 0.25, 188);
 }

@@ -163,16 +163,39 @@ void rp_recon_strata(uint64_t key, unsigned n, uint32_t *perm, double *xy)
     }
 }
 
+/* 1 when every face emits the same Le in every band (a furnace). */
+static int uniform_emission(const rp_scene *scene, size_t nb)
+{
+    const size_t nf = rp_scene_nfaces(scene);
+    const rp_material *m0 = nf ? rp_scene_face_material(scene, 0) : NULL;
+    for (size_t f = 1; f < nf; f++) {
+        const rp_material *m = rp_scene_face_material(scene, (uint32_t)f);
+        for (size_t b = 0; b < nb; b++)
+            if (m->Le[b] != m0->Le[b])
+                return 0;
+    }
+    return m0 && m0->emitter;
+}
+
 rp_status rp_recon_lights(const rp_scene *scene, rp_area_sampler **out, rp_error *err)
 {
     *out = NULL;
-    const size_t nb = rp_scene_nbands(scene), nf = rp_scene_nfaces(scene);
-    int any = 0;
-    for (size_t f = 0; f < nf && !any; f++)
-        any = rp_material_pure_emitter(rp_scene_face_material(scene, (uint32_t)f), nb);
-    if (!any)
+    if (uniform_emission(scene, rp_scene_nbands(scene)))
         return RP_OK;
-    return rp_area_sampler_create(scene, RP_NONE, RP_WEIGHT_POWER, out, err);
+    rp_status st = rp_area_sampler_create(scene, RP_NONE, RP_WEIGHT_POWER, out, err);
+    if (st == RP_OK && rp_area_sampler_count(*out) == 0) {
+        rp_area_sampler_destroy(*out);
+        *out = NULL;
+    }
+    return st;
+}
+
+/* Power heuristic (Veach 1997, sec. 9.2.4, beta = 2) for one sample of
+ * density p against the other strategy's q, as the path tracer weighs its
+ * two (pathtrace.c); the gather draws as many of each. */
+static inline double recon_mis(double p, double q)
+{
+    return p * p / (p * p + q * q);
 }
 
 void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t key, double *xy, uint32_t *perm,
@@ -195,9 +218,29 @@ void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t k
         (*rays)++;
         if (!rp_ray_closest_from(g->rc, h->p, h->n, wi, &hit) || !hit.front)
             continue;
-        if (g->lights && rp_material_pure_emitter(rp_scene_face_material(g->scene, hit.face), nb))
-            continue; /* sampled below */
-        g->radiosity(g->ctx, &hit, Bh);
+        const rp_material *mh = rp_scene_face_material(g->scene, hit.face);
+        if (!g->lights || !mh->emitter) {
+            g->radiosity(g->ctx, &hit, Bh);
+        } else {
+            /* An emitter: B = pi Le + rho H (Cohen & Wallace 1993, eq.
+             * 2.8).  Its reflected part rho H = B - pi Le is gathered here
+             * in full; its emitted part pi Le is shared with the light
+             * samples below by MIS, with this ray's weight.  A pure
+             * emitter reflects nothing, whatever the solution says. */
+            if (rp_material_pure_emitter(mh, nb))
+                for (size_t b = 0; b < nb; b++)
+                    Bh[b] = 0;
+            else
+                g->radiosity(g->ctx, &hit, Bh);
+            /* both densities in solid angle at h: cos / pi and
+             * pdf_A t^2 / cos_y */
+            double pl = rp_area_sampler_pdf(g->lights, hit.face) * hit.t * hit.t / -rp_v3_dot(wi, hit.n);
+            double w = recon_mis(c / RP_PI, pl);
+            for (size_t b = 0; b < nb; b++) {
+                double emitted = RP_PI * mh->Le[b], reflected = Bh[b] - emitted;
+                Bh[b] = (reflected > 0 ? reflected : 0) + w * emitted;
+            }
+        }
         for (size_t b = 0; b < nb; b++)
             E[b] += Bh[b] / G;
     }
@@ -207,9 +250,8 @@ void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t k
         for (unsigned k = 0; k < G; k++) {
             rp_area_sample ls;
             rp_area_sampler_sample(g->lights, recon_u01(lkey, 4 * (uint64_t)G + k), xy[2 * k], xy[2 * k + 1], &ls);
-            const rp_material *me = rp_scene_face_material(g->scene, ls.face);
-            if (!rp_material_pure_emitter(me, nb) || !(ls.pdf_area > 0))
-                continue; /* an emitter that reflects is gathered above */
+            if (!(ls.pdf_area > 0))
+                continue;
             rp_vec3 d = rp_v3_sub(ls.p, h->p);
             double r2 = rp_v3_dot(d, d), cx = rp_v3_dot(h->n, d), cy = -rp_v3_dot(ls.n, d);
             if (!(cx > 0 && cy > 0 && r2 > 0))
@@ -217,8 +259,13 @@ void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t k
             (*rays)++;
             if (rp_ray_occluded(g->rc, h->p, h->n, ls.p, ls.n))
                 continue;
-            /* Irradiance Le cos_x cos_y / r^2 over the area density. */
-            double w = cx * cy / (r2 * r2 * ls.pdf_area * G);
+            /* Irradiance Le cos_x cos_y / r^2 over the area density, MIS
+             * weighted against the cosine rays (densities in solid angle:
+             * pdf_A r^2 / cos_y and cos_x / pi). */
+            double dist = sqrt(r2);
+            double w = cx * cy / (r2 * r2 * ls.pdf_area * G) *
+                       recon_mis(ls.pdf_area * r2 * dist / cy, cx / (dist * RP_PI));
+            const rp_material *me = rp_scene_face_material(g->scene, ls.face);
             for (size_t b = 0; b < nb; b++)
                 E[b] += me->Le[b] * w;
         }

@@ -12,7 +12,7 @@
  *            incident elements of the same surface and smoothing group,
  *            rp_recon_corners), interpolated with rp_mesh_element_weights;
  *   gather   one bounce of final gathering (rp_recon_final_gather): L = Le
- *            + rho/pi E(x), the irradiance from the area lights sampled
+ *            + rho/pi E(x), the irradiance from the emitters sampled
  *            directly and from cosine-distributed rays that see the flat B
  *            of the element they hit.
  *
@@ -89,13 +89,19 @@ rp_status rp_recon_camera(const rp_scene *scene, const rp_raycast *rc, unsigned 
  *
  * E_rest from `rays` cosine-distributed rays, each seeing the solution's
  * radiosity where it lands, E = pi / G sum L = 1 / G sum B (pdf cos / pi);
- * E_light from as many points on the pure emitters (faces that emit and
- * reflect nothing, the area lights), chosen by power through `lights`,
- * Le cos cos / (r^2 pdf) each, with a shadow ray.  The cosine rays then
- * leave pure emitters out: direct light from a small lamp is sampled where
- * it is, not waited for.  A surface that emits and reflects is part of the
- * solution and is gathered (so a furnace stays exact).  radiosity gives
- * the method's B (nb values) at the front-facing hit g. */
+ * E_light from as many points on the emitters (every face with Le > 0,
+ * pure area lights and surfaces that emit and reflect alike), chosen by
+ * power through `lights`, Le cos cos / (r^2 pdf) each, with a shadow ray.
+ * A cosine ray that lands on an emitter counts its reflected part
+ * B - pi Le in full (a pure emitter: 0), and its emitted part pi Le is
+ * shared with the light samples by multiple importance sampling (power
+ * heuristic, Veach 1997), so nothing is counted twice: direct light from a
+ * small lamp is sampled where it is, and the 1/r^2 of light samples on a
+ * large emitter next to x is left to the cosine rays.  Without `lights`
+ * (NULL: rp_recon_lights found emission uniform over the whole scene, a
+ * furnace) everything is gathered by the cosine rays, which is exact in a
+ * closed uniform enclosure.  radiosity gives the method's B (nb values) at
+ * the front-facing hit g. */
 typedef struct rp_recon_gather {
     const rp_scene *scene;
     const rp_raycast *rc;
@@ -112,7 +118,11 @@ void rp_recon_final_gather(const rp_recon_gather *g, const rp_hit *h, uint64_t k
                            double *L, unsigned long long *rays);
 
 /* The light sampler for rp_recon_final_gather: every emitting face by
- * power; *out is NULL when the scene has no pure emitter. */
+ * power.  *out is NULL when nothing emits, or when every face emits the
+ * same Le (a furnace): then every cosine ray lands on the same emission,
+ * which sampling it by area could only make noisier (the furnace's gather
+ * image, Gauss-Seidel, 96 elements, 4 x 4 rays: RMSE 0 gathered, 0.036
+ * with MIS light samples, 0.50 with light samples alone). */
 rp_status rp_recon_lights(const rp_scene *scene, rp_area_sampler **out, rp_error *err);
 
 /* Stratified positions of n samples in the unit square from key: a
