@@ -643,8 +643,8 @@ Test(scene, refusals_from_text)
 {
     const char *light = "material lamp emit 1\nquad light lamp  0 1 0  1 1 0  1 1 1  0 1 1\n";
     char text[512];
-    snprintf(text, sizeof text, "%smaterial m reflect 1.0\n", light);
-    parse_bad(text, "test.scene:3: reflect 1 outside [0, 1)");
+    snprintf(text, sizeof text, "%smaterial m reflect 1.2\n", light);
+    parse_bad(text, "test.scene:3: reflect 1.2 outside [0, 1]");
     snprintf(text, sizeof text, "%s\n\nquad q nope  0 0 0  1 0 0  1 0 1  0 0 1\n", light);
     parse_bad(text, "test.scene:5: unknown material 'nope'");
     snprintf(text, sizeof text, "%striangle t lamp 0 0 0 1 0 0 0 0 1abc\n", light);
