@@ -361,6 +361,10 @@ int rp_cmd_experiment(int argc, char **argv)
         rc = parse_ulong(&cli, "seeds", 1, 1000, &seeds);
     if (!rc)
         rc = parse_positive(&cli, "budget", &budget);
+    if (!rc && cli.camera) {
+        fprintf(stderr, "radpt experiment: takes no --camera (each experiment's scenes have their own; see radpt help)\n");
+        rc = 2;
+    }
     const rp_experiment *e = NULL;
     if (!rc) {
         e = rp_experiment_lookup(cli.scene);
