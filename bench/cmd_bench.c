@@ -355,16 +355,16 @@ int rp_cmd_experiment(int argc, char **argv)
     int ac = strip_flags(argc, argv, av, flags, found);
     rp_cli cli = {.command = "experiment"};
     int rc = rp_cli_parse(&cli, ac, av, extra, 0);
+    if (!rc && cli.camera) {
+        fprintf(stderr, "radpt experiment: takes no --camera (each experiment's scenes have their own; see radpt help)\n");
+        rc = 2;
+    }
     unsigned long seeds = 0;
     double budget = 0;
     if (!rc)
         rc = parse_ulong(&cli, "seeds", 1, 1000, &seeds);
     if (!rc)
         rc = parse_positive(&cli, "budget", &budget);
-    if (!rc && cli.camera) {
-        fprintf(stderr, "radpt experiment: takes no --camera (each experiment's scenes have their own; see radpt help)\n");
-        rc = 2;
-    }
     const rp_experiment *e = NULL;
     if (!rc) {
         e = rp_experiment_lookup(cli.scene);
