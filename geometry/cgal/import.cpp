@@ -181,7 +181,7 @@ Records scan_off(std::istream &in)
         ++n;
         std::string s = strip_comment(line);
         if (!blank(s))
-            data.push_back({n, s});
+            data.push_back({n, std::move(s)});
     }
     if (data.empty())
         return r;
@@ -210,10 +210,12 @@ Records scan_off(std::istream &in)
     long long nv = -1, nf = -1;
     if (!(cs >> nv >> nf) || nv < 0 || nf < 0)
         return r;
+    r.vertices.reserve((std::size_t)std::min<long long>(nv, (long long)data.size()));
+    r.faces.reserve((std::size_t)std::min<long long>(nf, (long long)data.size()));
     for (long long i = 0; i < nv && at < data.size(); ++i, ++at)
-        r.vertices.push_back(data[at]);
+        r.vertices.push_back(std::move(data[at]));
     for (long long i = 0; i < nf && at < data.size(); ++i, ++at)
-        r.faces.push_back(data[at]);
+        r.faces.push_back(std::move(data[at]));
     r.ok = true;
     return r;
 }
@@ -477,51 +479,65 @@ Tally orientation_conflicts(const std::vector<Polygon> &polys, const std::vector
 /* Flags the faces that repeat an earlier face exactly: the same vertex
  * positions in the same cyclic order, from any starting corner.  Positions,
  * not indices, so a copy over duplicated vertices is found too; the reverse
- * order is another face (the back of a two-sided sheet). */
+ * order is another face (the back of a two-sided sheet).  Each face is
+ * brought to its lexicographically smallest rotation and hashed (FNV-1a
+ * over the coordinates' bits); faces with equal hashes are compared in
+ * full. */
 std::vector<char> duplicate_faces(const std::vector<Point> &pts, const std::vector<Polygon> &polys)
 {
-    std::vector<std::vector<double> > key(polys.size());
-    for (std::size_t f = 0; f < polys.size(); ++f) {
+    auto coord = [&](const Polygon &p, std::size_t k, int c) {
+        const Point &q = pts[p[k % p.size()]];
+        const double v = c == 0 ? q.x() : c == 1 ? q.y() : q.z();
+        return v == 0 ? 0.0 : v; /* -0 and +0 are one position */
+    };
+    /* <0, 0, >0: corner sequence of p from rotation i against q from j */
+    auto compare = [&](const Polygon &p, std::size_t i, const Polygon &q, std::size_t j) {
+        for (std::size_t k = 0; k < p.size(); ++k)
+            for (int c = 0; c < 3; ++c) {
+                const double a = coord(p, i + k, c), b = coord(q, j + k, c);
+                if (a != b)
+                    return a < b ? -1 : 1;
+            }
+        return 0;
+    };
+    const std::size_t n = polys.size();
+    std::vector<std::size_t> rot(n, 0);
+    std::vector<std::pair<uint64_t, std::size_t> > order(n);
+    for (std::size_t f = 0; f < n; ++f) {
         const Polygon &p = polys[f];
-        const std::size_t n = p.size();
-        auto corner_less = [&](std::size_t i, std::size_t j) {
-            const Point &a = pts[p[i % n]], &b = pts[p[j % n]];
-            if (a.x() != b.x())
-                return a.x() < b.x() ? -1 : 1;
-            if (a.y() != b.y())
-                return a.y() < b.y() ? -1 : 1;
-            if (a.z() != b.z())
-                return a.z() < b.z() ? -1 : 1;
-            return 0;
-        };
-        /* The rotation that is lexicographically smallest. */
-        std::size_t best = 0;
-        for (std::size_t r = 1; r < n; ++r) {
-            int c = 0;
-            for (std::size_t k = 0; k < n && c == 0; ++k)
-                c = corner_less(r + k, best + k);
-            if (c < 0)
-                best = r;
-        }
-        key[f].reserve(3 * n);
-        for (std::size_t k = 0; k < n; ++k) {
-            const Point &q = pts[p[(best + k) % n]];
-            /* -0 and +0 are one position */
-            key[f].push_back(q.x() == 0 ? 0.0 : q.x());
-            key[f].push_back(q.y() == 0 ? 0.0 : q.y());
-            key[f].push_back(q.z() == 0 ? 0.0 : q.z());
-        }
+        for (std::size_t r = 1; r < p.size(); ++r)
+            if (compare(p, r, p, rot[f]) < 0)
+                rot[f] = r;
+        uint64_t h = UINT64_C(0xcbf29ce484222325) ^ p.size();
+        for (std::size_t k = 0; k < p.size(); ++k)
+            for (int c = 0; c < 3; ++c) {
+                const double v = coord(p, rot[f] + k, c);
+                uint64_t bits;
+                std::memcpy(&bits, &v, sizeof bits);
+                for (int byte = 0; byte < 8; ++byte) {
+                    h ^= (bits >> (8 * byte)) & 0xff;
+                    h *= UINT64_C(0x100000001b3);
+                }
+            }
+        order[f] = {h, f};
     }
-    std::vector<std::size_t> order(polys.size());
-    for (std::size_t f = 0; f < order.size(); ++f)
-        order[f] = f;
-    std::sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
-        return key[i] != key[j] ? key[i] < key[j] : i < j;
-    });
-    std::vector<char> dup(polys.size(), 0);
-    for (std::size_t k = 1; k < order.size(); ++k)
-        if (key[order[k]] == key[order[k - 1]])
-            dup[order[k]] = 1;
+    std::sort(order.begin(), order.end());
+    std::vector<char> dup(n, 0);
+    for (std::size_t i = 0; i < n;) {
+        std::size_t j = i;
+        while (j < n && order[j].first == order[i].first)
+            ++j;
+        /* a run of equal hashes, in file order: each face against the
+         * earlier ones not already found to be copies */
+        for (std::size_t a = i + 1; a < j; ++a)
+            for (std::size_t b = i; b < a && !dup[order[a].second]; ++b) {
+                const std::size_t fa = order[a].second, fb = order[b].second;
+                if (!dup[fb] && polys[fa].size() == polys[fb].size() &&
+                    compare(polys[fa], rot[fa], polys[fb], rot[fb]) == 0)
+                    dup[fa] = 1;
+            }
+        i = j;
+    }
     return dup;
 }
 
