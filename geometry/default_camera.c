@@ -11,9 +11,9 @@
  * backs of its walls, which are black for every solver.  So the view is
  * tested: 7 x 7 rays through the image find the first face each meets;
  * when back faces outnumber front faces, two eyes inside the box are tried
- * (near the +z wall, then the centre), with the field widened to show the
- * -z wall (40 to 100 degrees), and the first whose rays meet more fronts
- * than backs is used.  If none does, the outside view stays. */
+ * (near the +z wall, then the centre), with the field widened so that the
+ * -z wall fills 70% of it and the walls around it show (40 to 100
+ * degrees), and the first whose rays meet more fronts than backs is used.  If none does, the outside view stays. */
 #include "default_camera.h"
 
 #include <math.h>
@@ -26,6 +26,7 @@
 #define MARGIN 1.1
 #define PROBE_RAYS 7 /* per image side */
 #define FOV_MAX 100.0
+#define INSIDE_FILL 0.7 /* the far wall's share of the view from inside */
 #define ROUND_REL 1e-6 /* printed digits resolve 1e-6 of the scene's extent */
 
 /* Closest hit of the ray o + t d (t > 0) on a triangle (Moller & Trumbore
@@ -181,7 +182,7 @@ rp_status rp_scene_default_camera(const rp_scene *s, rp_camera *out, rp_error *e
     const double depth[2] = {0.95, 0.5}; /* distance to the -z wall / z extent */
     for (int k = 0; k < 2; k++) {
         double dist = depth[k] * e.z;
-        double fov = 2 * atan(h / dist) * 180 / RP_PI;
+        double fov = 2 * atan(h / (INSIDE_FILL * dist)) * 180 / RP_PI;
         fov = fmin(FOV_MAX, fmax(RP_DEFAULT_CAMERA_FOV, fov));
         rp_camera in;
         if ((st = make_camera(rp_v3(c.x, c.y, lo.z + dist), dist, fov, q, &in, err)))
