@@ -32,8 +32,9 @@
  *   3.2 mm off the plane of the others) is refused.  Convex when every
  *   corner turns the same way as the normal, by more than 1e-10 rad.
  * - `reflect` lies in [0, 1]: 1 is a perfect reflector, as an MTL's Kd 1
- *   is.  Nothing divides by 1 - rho of one material unguarded (the exact
- *   furnace reference refuses rho = 1: its L = Le / (1 - rho) is infinite).
+ *   is.  A closed scene that reflects 1 on every surface in a band where it
+ *   emits is refused: its radiance is infinite (L = Le / (1 - rho)).  The
+ *   exact furnace reference refuses rho = 1 as well.
  * - Meshes: zero-area faces and exact duplicates (same positions, same
  *   winding) are dropped by the reader, with one warning per kind naming
  *   the first one's line.  `mesh NAME MATERIAL FILE` is one surface: edges
@@ -1538,6 +1539,34 @@ static rp_status finish(parser *p, const char *name, int line)
     return RP_OK;
 }
 
+/* A closed scene that reflects everything in some band (reflect 1 on every
+ * surface) and emits in that band keeps all the light it makes: its
+ * radiance is infinite (the furnace's Le / (1 - rho)), so it is refused.
+ * Closedness is only tested when the reflectances call for it. */
+static rp_status finite_radiance(parser *p)
+{
+    rp_scene *s = p->s;
+    for (size_t b = 0; b < s->nbands; b++) {
+        int all = s->nsurfaces > 0, emits = 0;
+        for (size_t i = 0; i < s->nsurfaces; i++) {
+            const rp_material *m = &s->materials[s->surfaces[i].material];
+            all &= m->rho[b] >= 1;
+            emits |= m->Le[b] > 0;
+        }
+        if (all && emits && rp_scene_is_closed(s) == 1) {
+            const rp_surface *surf = &s->surfaces[0];
+            char band[32] = "";
+            if (s->nbands > 1)
+                snprintf(band, sizeof band, " in band %zu", b);
+            return fail(p, surf->file, surf->line,
+                        "the scene is closed, reflects everything%s (reflect 1 on every surface) and emits: its "
+                        "radiance is infinite (a furnace's Le / (1 - rho))",
+                        band);
+        }
+    }
+    return RP_OK;
+}
+
 static void parser_free(parser *p)
 {
     for (size_t i = 0; i < p->nstack; i++)
@@ -1575,6 +1604,8 @@ static rp_status parse_top(const char *text, const char *name, const char *dir, 
         st = parse_source(&p, copy, &src, &nlines);
     if (!st)
         st = finish(&p, src.name, nlines > 0 ? nlines : 1);
+    if (!st)
+        st = finite_radiance(&p);
     free(copy);
     free(dcopy);
     parser_free(&p);
@@ -1630,6 +1661,8 @@ static rp_status load_obj(const char *path, rp_scene **out, rp_error *err)
         st = obj_place(&p, &src, 0, name, &m, NULL, 1, origin);
     if (!st)
         st = finish(&p, name, 0);
+    if (!st)
+        st = finite_radiance(&p);
     rp_tri_mesh_free(&m);
     if (st) {
         rp_scene_destroy(p.s);

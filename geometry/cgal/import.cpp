@@ -1133,8 +1133,16 @@ int read_scene(const std::string &path, rp_tri_mesh *out, char *msg, size_t msgl
                 throw Read_error{path, st.line, "mtllib needs a file name"};
             for (std::size_t i = 1; i < st.tok.size(); ++i) {
                 const std::string file = st.tok[i][0] == '/' ? st.tok[i] : dir + st.tok[i];
-                if (loaded.insert(file).second)
+                if (!loaded.insert(file).second)
+                    continue;
+                try {
                     read_mtl(file, st.line, path, &lib, &warnings);
+                } catch (Read_error &e) {
+                    /* say which OBJ asked for the library */
+                    if (e.path != path)
+                        e.what += " (material library of " + path + ":" + std::to_string(st.line) + ")";
+                    throw;
+                }
             }
         }
 
