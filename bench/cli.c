@@ -1,5 +1,7 @@
 #include "cli.h"
 
+#include "../geometry/default_camera.h"
+
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -104,7 +106,7 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
         const rp_option_spec *spec = method_option(type, name);
         if (spec && !spec->arg)
             is_flag = 1;
-        int known = is_flag || spec || !strcmp(name, "method") || !strcmp(name, "png") ||
+        int known = is_flag || spec || !strcmp(name, "method") || !strcmp(name, "png") || !strcmp(name, "camera") ||
                     !strcmp(name, "seed") || !strcmp(name, "threads") || !strcmp(name, "time");
         for (const char *const *e = allowed_extra; e && *e; e++)
             known |= strcmp(*e, name) == 0;
@@ -138,6 +140,8 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
             cli->surface_averages = 1;
         } else if (strcmp(name, "png") == 0) {
             cli->png = value;
+        } else if (strcmp(name, "camera") == 0) {
+            cli->camera = value;
         } else if (strcmp(name, "seed") == 0) {
             if (parse_u64(value, &cli->seed))
                 return usage(cli, "--seed: '%s' is not a non-negative integer", value);
@@ -269,4 +273,69 @@ void rp_cli_catch_signals(void (*handler)(int))
     sigemptyset(&sa.sa_mask);
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
+}
+
+rp_status rp_cli_load_scene(const char *path, const char *camera, int need_camera, rp_scene **out, rp_error *err)
+{
+    *out = NULL;
+    rp_camera given;
+    rp_status st;
+    if (camera && (st = rp_camera_parse(camera, "--camera", &given, err)) != RP_OK)
+        return st;
+    rp_scene *scene = NULL;
+    if ((st = rp_scene_load(path, &scene, err)) != RP_OK)
+        return st;
+    for (size_t i = 0; i < rp_scene_nwarnings(scene); i++)
+        fprintf(stderr, "radpt: warning: %s\n", rp_scene_warning(scene, i));
+    if (camera) {
+        st = rp_scene_set_camera(scene, &given, err);
+    } else if (need_camera && !rp_scene_camera(scene)) {
+        rp_camera def;
+        st = rp_scene_default_camera(scene, &def, err);
+        if (st == RP_OK)
+            st = rp_scene_set_camera(scene, &def, err);
+        if (st == RP_OK) {
+            char words[512];
+            rp_camera_format(&def, words, sizeof words);
+            fprintf(stderr, "radpt: %s has no camera; using the default, which is --camera \"%s\"\n", path,
+                    words);
+        }
+    }
+    if (st != RP_OK) {
+        rp_scene_destroy(scene);
+        return st;
+    }
+    *out = scene;
+    return RP_OK;
+}
+
+const char *rp_cli_name(const char *name, char *buf, size_t len)
+{
+    int plain = name[0] != '\0';
+    for (const unsigned char *c = (const unsigned char *)name; *c && plain; c++)
+        plain = *c > ' ' && *c != '"' && *c != '\\' && *c != '#' && *c != 0x7f;
+    if (plain) {
+        snprintf(buf, len, "%s", name);
+        return buf;
+    }
+    size_t n = 0;
+    if (len < 3) {
+        if (len)
+            buf[0] = '\0';
+        return buf;
+    }
+    buf[n++] = '"';
+    for (const unsigned char *c = (const unsigned char *)name; *c && n + 5 < len; c++) {
+        if (*c == '"' || *c == '\\') {
+            buf[n++] = '\\';
+            buf[n++] = (char)*c;
+        } else if (*c < ' ' || *c == 0x7f) {
+            n += (size_t)snprintf(buf + n, len - n, "\\x%02x", *c);
+        } else {
+            buf[n++] = (char)*c;
+        }
+    }
+    buf[n++] = '"';
+    buf[n] = '\0';
+    return buf;
 }

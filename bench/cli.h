@@ -6,6 +6,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "../geometry/scene.h"
 #include "../geometry/status.h"
 #include "../solvers/solver.h"
 
@@ -17,6 +18,7 @@ typedef struct rp_cli {
     const char *method;
     const char *out;           /* -o */
     const char *png;           /* --png */
+    const char *camera;        /* --camera "eye X Y Z look ... size W H" */
     uint64_t seed;
     int threads;
     double time_budget;        /* --time, seconds; 0 = none */
@@ -69,5 +71,22 @@ double rp_clock(void);
 
 /* Writes s as a JSON string literal (with quotes). */
 void rp_json_string(FILE *f, const char *s);
+
+/* The one scene loader of every command: loads path (format 1 or .obj),
+ * gives it the camera words of --camera when camera is not NULL (before
+ * anything hashes the scene), prints each of the scene's warnings once on
+ * stderr as "radpt: warning: FILE:LINE: ...", and, when need_camera is set
+ * and the scene has no camera, sets the default camera (default_camera.h)
+ * and prints it as the --camera words that give it back.  Bad --camera
+ * words are RP_ERR_INPUT ("--camera: ..."), checked before the scene is
+ * read. */
+rp_status rp_cli_load_scene(const char *path, const char *camera, int need_camera, rp_scene **out,
+                            rp_error *err);
+
+/* A name as a text column shows it: as is when it is a plain word, else
+ * in double quotes with \" and \\ escaped and control characters as \xHH
+ * (names with spaces, quotes, '#' or nothing in them).  Into buf; returns
+ * buf. */
+const char *rp_cli_name(const char *name, char *buf, size_t len);
 
 #endif

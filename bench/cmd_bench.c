@@ -195,7 +195,7 @@ int rp_cmd_reference(int argc, char **argv)
     rp_error err;
     rp_scene *scene = NULL;
     rp_reference *ref = NULL;
-    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     if (st == RP_OK && rp.seed == 0 && seed_given(ac, av))
         st = rp_error_set(&err, RP_ERR_INPUT, "--seed 0 is not allowed for a reference");
     if (st == RP_OK)
@@ -244,7 +244,8 @@ int rp_cmd_reference(int argc, char **argv)
             printf("parameters and surface averages: %s\n", ref->json_path);
             printf("%-20s  radiance per band +- standard error\n", "surface");
             for (size_t s = 0; s < ref->nsurfaces; s++) {
-                printf("%-20s ", surf[s].name);
+                char nm[512];
+                printf("%-20s ", rp_cli_name(surf[s].name, nm, sizeof nm));
                 for (size_t b = 0; b < nb; b++)
                     printf(" %.6g +- %.2g", ref->surface_radiance[s * nb + b], ref->surface_stderr[s * nb + b]);
                 printf("\n");
@@ -318,7 +319,7 @@ int rp_cmd_bench(int argc, char **argv)
     rp_scene *scene = NULL;
     rp_reference *ref = NULL;
     rp_bench *bench = NULL;
-    st = rp_scene_load(cli.scene, &scene, &err);
+    st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     if (st == RP_OK) {
         rp_reference_params rp = {.size = sizeof rp, .spp = ref_spp, .samples = ref_samples,
                                   .threads = cli.threads, .cache_dir = rp_cli_extra(&cli, "cache"),
@@ -372,6 +373,10 @@ int rp_cmd_experiment(int argc, char **argv)
     int ac = strip_flags(argc, argv, av, flags, found);
     rp_cli cli = {.command = "experiment"};
     int rc = rp_cli_parse(&cli, ac, av, extra, 0);
+    if (!rc && cli.camera) {
+        fprintf(stderr, "radpt experiment: takes no --camera (each experiment's scenes have their own; see radpt help)\n");
+        rc = 2;
+    }
     unsigned long seeds = 0;
     double budget = 0;
     if (!rc)

@@ -61,17 +61,18 @@ static int ff_parse_double(const char *s, double lo, double hi, double *out)
 /* Lists the scene's surface names after an unknown one. */
 static int ff_unknown_surface(const rp_scene *scene, const char *opt, const char *name)
 {
+    char nm[512];
     fprintf(stderr, "radpt formfactor: %s: no surface named '%s'; the scene has:", opt, name);
     const rp_surface *s = rp_scene_surfaces(scene);
     for (size_t k = 0; k < rp_scene_nsurfaces(scene); k++)
-        fprintf(stderr, " %s", s[k].name);
+        fprintf(stderr, " %s", rp_cli_name(s[k].name, nm, sizeof nm));
     fprintf(stderr, "\n");
     return 2;
 }
 
 int rp_cmd_formfactor(int argc, char **argv)
 {
-    const char *scene_path = NULL, *from = NULL, *to = NULL, *method_name = "analytic";
+    const char *scene_path = NULL, *from = NULL, *to = NULL, *method_name = "analytic", *camera = NULL;
     uint64_t samples = 0, resolution = 0, rays_opt = 0, elements = 0, seed = 1, threads = 0;
     double max_edge = 0, tolerance = 0;
     int json = 0, have_samples = 0, have_resolution = 0, have_rays = 0, have_tol = 0;
@@ -108,6 +109,8 @@ int rp_cmd_formfactor(int argc, char **argv)
             to = val;
         } else if (strcmp(name, "--method") == 0) {
             method_name = val;
+        } else if (strcmp(name, "--camera") == 0) {
+            camera = val;
         } else if (strcmp(name, "--samples") == 0) {
             if (ff_parse_u64(val, 1, 1000000000, &samples))
                 return ff_usage("--samples: '%s' is not an integer in [1, 1e9]", val);
@@ -164,7 +167,7 @@ int rp_cmd_formfactor(int argc, char **argv)
     fp.tolerance = tolerance;
 
     rp_scene *scene = NULL;
-    if ((st = rp_scene_load(scene_path, &scene, &err)) != RP_OK)
+    if ((st = rp_cli_load_scene(scene_path, camera, 0, &scene, &err)) != RP_OK)
         return rp_cli_fail(st, &err);
     uint32_t sa = rp_scene_find_surface(scene, from), sb = rp_scene_find_surface(scene, to);
     if (sa == RP_NONE || sb == RP_NONE) {

@@ -1,7 +1,10 @@
-/* radpt info SCENE [--json]: what a scene holds, as the solvers see it. */
+/* radpt info SCENE [--json] [--camera WORDS]: what a scene holds, as the
+ * solvers see it, with the warnings its reading raised and, for a scene
+ * without a camera, the default camera a render would use. */
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "../geometry/default_camera.h"
 #include "../geometry/mesh.h"
 #include "../geometry/scene.h"
 #include "cli.h"
@@ -36,6 +39,16 @@ static void json_array(FILE *f, const double *v, size_t n)
     fputc(']', f);
 }
 
+/* The words of the camera a render would use when the scene has none
+ * (empty when it has one or none can be made). */
+static void default_words(const rp_scene *scene, char *words, size_t len)
+{
+    rp_camera def;
+    words[0] = '\0';
+    if (!rp_scene_camera(scene) && rp_scene_default_camera(scene, &def, NULL) == RP_OK)
+        rp_camera_format(&def, words, len);
+}
+
 static void print_json(const rp_scene *scene, const char *path, int closed, const rp_mesh *mesh)
 {
     size_t nb = rp_scene_nbands(scene);
@@ -62,7 +75,18 @@ static void print_json(const rp_scene *scene, const char *path, int closed, cons
                cam->up.x, cam->up.y, cam->up.z, cam->fov_deg, cam->width, cam->height);
     else
         printf(", \"camera\": null");
-    printf(", \"materials\": [");
+    char words[512];
+    default_words(scene, words, sizeof words);
+    if (words[0]) {
+        printf(", \"default_camera\": ");
+        rp_json_string(stdout, words);
+    }
+    printf(", \"warnings\": [");
+    for (size_t i = 0; i < rp_scene_nwarnings(scene); i++) {
+        printf("%s", i ? ", " : "");
+        rp_json_string(stdout, rp_scene_warning(scene, i));
+    }
+    printf("], \"materials\": [");
     for (size_t i = 0; i < rp_scene_nmaterials(scene); i++) {
         printf("%s{\"name\": ", i ? ", " : "");
         rp_json_string(stdout, mats[i].name);
@@ -124,16 +148,21 @@ static void print_text(const rp_scene *scene, const char *path, int closed, cons
         printf("camera    eye (%g, %g, %g) look (%g, %g, %g) up (%g, %g, %g) fov %g deg, %u x %u\n",
                cam->eye.x, cam->eye.y, cam->eye.z, cam->look.x, cam->look.y, cam->look.z,
                cam->up.x, cam->up.y, cam->up.z, cam->fov_deg, cam->width, cam->height);
-    else
-        printf("camera    none\n");
+    else {
+        char words[512];
+        default_words(scene, words, sizeof words);
+        printf("camera    none; render uses the default --camera \"%s\"\n", words);
+    }
     printf("\n%-20s %-12s %-8s %7s %14s %9s  %s\n", "surface", "material", "kind", "faces", "area",
            "elements", "emitted power (W per band)");
     for (size_t i = 0; i < rp_scene_nsurfaces(scene); i++) {
         uint32_t first = 0, count = 0;
         if (mesh)
             rp_mesh_surface_elements(mesh, (uint32_t)i, &first, &count);
-        printf("%-20s %-12s %-8s %7u %14.6f %9u ", surf[i].name, mats[surf[i].material].name,
-               surface_kind_name(surf[i].kind), surf[i].nfaces, surf[i].area, count);
+        char sn[512], mn[512];
+        printf("%-20s %-12s %-8s %7u %14.6f %9u ", rp_cli_name(surf[i].name, sn, sizeof sn),
+               rp_cli_name(mats[surf[i].material].name, mn, sizeof mn), surface_kind_name(surf[i].kind),
+               surf[i].nfaces, surf[i].area, count);
         if (mats[surf[i].material].emitter) {
             rp_scene_surface_power(scene, (uint32_t)i, power);
             for (size_t b = 0; b < nb && b < 8; b++)
@@ -156,6 +185,8 @@ static void print_text(const rp_scene *scene, const char *path, int closed, cons
         printf("quality   aspect ratio min %.3f mean %.3f max %.3f (1 is best); area %.4g to %.4g\n",
                q.min_aspect, q.mean_aspect, q.max_aspect, q.min_area, q.max_area);
     }
+    if (rp_scene_nwarnings(scene) > 0)
+        printf("warnings  %zu (on stderr, and in --json)\n", rp_scene_nwarnings(scene));
     free(power);
 }
 
@@ -167,7 +198,7 @@ int rp_cmd_info(int argc, char **argv)
         return rc;
     rp_error err;
     rp_scene *scene = NULL;
-    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 0, &scene, &err);
     if (st != RP_OK)
         return rp_cli_fail(st, &err);
     int closed = rp_scene_is_closed(scene);

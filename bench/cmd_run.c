@@ -261,7 +261,7 @@ int rp_cmd_render(int argc, char **argv)
     rp_solver *solver = NULL;
     image_planes planes = {0};
     float *radiance = NULL;
-    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     if (st != RP_OK)
         goto done;
     const rp_camera *cam = rp_scene_camera(scene);
@@ -404,7 +404,7 @@ int rp_cmd_probe(int argc, char **argv)
     rp_scene *scene = NULL;
     rp_solver *solver = NULL;
     double *mean = NULL, *se = NULL;
-    rp_status st = rp_scene_load(cli.scene, &scene, &err);
+    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 0, &scene, &err);
     if (st != RP_OK)
         goto done;
     rp_options opts;
@@ -466,7 +466,8 @@ int rp_cmd_probe(int argc, char **argv)
         printf("; radiance W sr^-1 m^-2 per band +- standard error\n");
         printf("%-20s %14s  radiance\n", "surface", "area");
         for (size_t s = 0; s < ns; s++) {
-            printf("%-20s %14.6f ", surf[s].name, surf[s].area);
+            char nm[512];
+            printf("%-20s %14.6f ", rp_cli_name(surf[s].name, nm, sizeof nm), surf[s].area);
             for (size_t b = 0; b < nb; b++)
                 printf(" %.6g +- %.2g", mean[s * nb + b], se[s * nb + b]);
             printf("\n");

@@ -54,6 +54,10 @@ static void print_usage(FILE *f)
           "      this text, or a method's options\n"
           "\n"
           "SCENE is a scene file (format 1, see README.md) or a Wavefront .obj with its .mtl.\n"
+          "Every command reading SCENE takes --camera \"eye X Y Z look X Y Z up X Y Z fov F size W H\"\n"
+          "(the scene format's camera words), which gives or replaces its camera; a scene without\n"
+          "one gets, where a camera is needed, a default one, printed as such --camera words.\n"
+          "What reading drops or ignores is printed as 'radpt: warning: FILE:LINE: ...'.\n"
           "--time stops a run after SECONDS; without it a method stops by its own rule\n"
           "(e.g. --spp for pathtrace). --seed defaults to 1, --threads to all cores.\n"
           "Exit status: 0 success, 1 runtime failure, 2 bad input or usage.\n\nmethods:\n",

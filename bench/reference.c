@@ -104,6 +104,15 @@ int rp_reference_furnace(const rp_scene *scene, double *L, rp_error *err)
     rp_raycast_destroy(rc);
     if (!inside)
         return 0;
+    /* rho = 1 (allowed: a perfect reflector) has no finite, unique furnace
+     * radiance: nothing leaves the enclosure. */
+    for (size_t b = 0; b < nb; b++)
+        if (!(m0->rho[b] < 1)) {
+            rp_error_set(err, RP_ERR_INPUT,
+                         "a closed enclosure that reflects everything (reflect 1 in band %zu) has no finite "
+                         "radiance (furnace: L = Le / (1 - rho))", b);
+            return -2;
+        }
     for (size_t b = 0; b < nb; b++)
         L[b] = m0->Le[b] / (1.0 - m0->rho[b]);
     return 1;
@@ -178,7 +187,7 @@ rp_status rp_reference_key(const rp_scene *scene, const rp_reference_params *par
     size_t nb = rp_scene_nbands(scene);
     int exact = nb <= 64 ? rp_reference_furnace(scene, L, err) : 0;
     if (exact < 0)
-        return RP_ERR_RUNTIME;
+        return exact == -2 ? RP_ERR_INPUT : RP_ERR_RUNTIME;
     if (exact)
         snprintf(key, keylen, "radpt-reference 1; exact furnace L = Le / (1 - rho)");
     else {
@@ -669,6 +678,11 @@ rp_status rp_reference_get(const rp_scene *scene, const char *scene_name,
     rp_status st = rp_reference_key(scene, params, r->key, sizeof r->key, r->options_hash, err);
     if (st != RP_OK) {
         rp_reference_destroy(r);
+        if (st == RP_ERR_INPUT && err && scene_name) {
+            char msg[sizeof err->message];
+            snprintf(msg, sizeof msg, "%s", err->message);
+            rp_error_set(err, st, "%s: %s", scene_name, msg);
+        }
         return st;
     }
     const char *dir = params && params->cache_dir ? params->cache_dir : "refs";
@@ -682,7 +696,7 @@ rp_status rp_reference_get(const rp_scene *scene, const char *scene_name,
     int exact = r->nbands <= 64 ? rp_reference_furnace(scene, L, err) : 0;
     if (exact < 0) {
         rp_reference_destroy(r);
-        return RP_ERR_RUNTIME;
+        return exact == -2 ? RP_ERR_INPUT : RP_ERR_RUNTIME;
     }
     if (exact)
         for (size_t b = 0; b < r->nbands; b++)

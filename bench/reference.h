@@ -99,7 +99,9 @@ typedef struct rp_reference {
 } rp_reference;
 
 /* 1 if the furnace closed form applies, with L[b] = Le_b / (1 - rho_b)
- * (L has room for nbands values); 0 if not; -1 with err set on failure. */
+ * (L has room for nbands values); 0 if not; -1 with err set on failure;
+ * -2 with err set when the scene is a furnace that reflects everything
+ * (rho = 1 in some band), whose L is infinite or undetermined (bad input). */
 int rp_reference_furnace(const rp_scene *scene, double *L, rp_error *err);
 
 /* The pixel mask described above (mask: width * height); *count gets the

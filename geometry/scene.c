@@ -15,7 +15,7 @@
  *   spectral: sampled at each band's wavelength; grey: mean over 400-700 nm;
  *   rgb: box means, B over 400-500, G over 500-600, R over 600-700 nm.  The
  *   box filter is a crude stand-in for colour matching, but it keeps
- *   reflectance in [0, 1), maps a flat spectrum to the same value in every
+ *   reflectance in [0, 1], maps a flat spectrum to the same value in every
  *   band, and maps the Cornell light's measured emission (400:0 500:8
  *   600:15.6 700:18.4) to (17, 11.8, 4), the RGB radiance in common use.
  * - Degenerate faces: a triangle whose edge vectors have a cross product
@@ -31,13 +31,30 @@
  *   or more significant digits passes, and the Cornell red wall (one corner
  *   3.2 mm off the plane of the others) is refused.  Convex when every
  *   corner turns the same way as the normal, by more than 1e-10 rad.
- * - Meshes: degenerate faces (dropped by the reader) and edges used twice
- *   in the same direction are errors, never silently repaired.
+ * - `reflect` lies in [0, 1]: 1 is a perfect reflector, as an MTL's Kd 1
+ *   is.  A closed scene that reflects 1 on every surface in a band where it
+ *   emits is refused: its radiance is infinite (L = Le / (1 - rho)).  The
+ *   exact furnace reference refuses rho = 1 as well.
+ * - Meshes: zero-area faces and exact duplicates (same positions, same
+ *   winding) are dropped by the reader, with one warning per kind naming
+ *   the first one's line.  `mesh NAME MATERIAL FILE` is one surface: edges
+ *   used twice in the same direction are an error (its faces must agree on
+ *   their front).  `mesh NAME mtl FILE.obj` places an OBJ scene with its own
+ *   MTL materials, named "NAME/material", and surfaces "NAME/group" (as an
+ *   OBJ scene's, below).  Its RGB enters a grey scene as Rec. 709 luminance
+ *   (0.2126 R + 0.7152 G + 0.0722 B); a spectral scene refuses it, as an RGB
+ *   colour has no one spectrum.  `mtl` cannot name a material.
  * - OBJ scenes are rgb, without a camera.  Each (group, MTL material) pair
- *   is a surface named after the group, or "group.material" when the group
- *   mixes materials; Kd is reflect (must lie in [0, 1)), Ke is emit.  A
- *   face without a material is refused: no default reflectance is made up.
- *   The OBJ reader gives no line numbers, so its messages are "FILE: ...". */
+ *   is a surface named after the group (o or g; "default" before any), or
+ *   "group.material" when the group mixes materials; a name already taken
+ *   gets "~2", "~3", ... appended.  Kd is reflect, Ke is emit (a material
+ *   with both is a light that reflects).  A face without a material is
+ *   refused: no default reflectance is made up.  Faces keep their own
+ *   winding; inconsistent orientation is a warning (with the line of the
+ *   first face concerned), as an OBJ scene is many authored surfaces rather
+ *   than one skin.  What the reader ignores (Ks, Ns, maps, vt, vn, ...) is
+ *   listed in one warning per file.  Warnings live in the scene
+ *   (rp_scene_warning); nothing here prints them. */
 /* realpath (include cycles) is an X/Open extension in glibc. */
 #define _XOPEN_SOURCE 700
 
@@ -83,6 +100,9 @@ struct rp_scene {
 
     char **files; /* every file name a surface or camera may cite */
     size_t nfiles, cap_files;
+
+    char **warnings; /* "FILE:LINE: what", in the order found */
+    size_t nwarnings, cap_warnings;
 
     rp_vec3 lo, hi;
     double total_area;
@@ -136,6 +156,9 @@ void rp_scene_destroy(rp_scene *s)
     for (size_t i = 0; i < s->nfiles; i++)
         free(s->files[i]);
     free(s->files);
+    for (size_t i = 0; i < s->nwarnings; i++)
+        free(s->warnings[i]);
+    free(s->warnings);
     free(s);
 }
 
@@ -194,6 +217,37 @@ static rp_status fail(parser *p, const char *file, int line, const char *fmt, ..
 static rp_status nomem(parser *p)
 {
     return rp_error_set(p->err, RP_ERR_NOMEM, "out of memory while reading the scene");
+}
+
+/* Records a whole warning message. */
+static rp_status keep_warning(parser *p, const char *text)
+{
+    rp_scene *s = p->s;
+    char *d = dup_string(text);
+    if (!d || !grow((void **)&s->warnings, &s->cap_warnings, s->nwarnings + 1, sizeof *s->warnings)) {
+        free(d);
+        return nomem(p);
+    }
+    s->warnings[s->nwarnings++] = d;
+    return RP_OK;
+}
+
+/* Records a warning "FILE:LINE: what" ("FILE: what" when line is 0). */
+#if defined(__GNUC__)
+__attribute__((format(printf, 4, 5)))
+#endif
+static rp_status add_warning(parser *p, const char *file, size_t line, const char *fmt, ...)
+{
+    char what[1024], full[1400];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(what, sizeof what, fmt, ap);
+    va_end(ap);
+    if (line > 0)
+        snprintf(full, sizeof full, "%s:%zu: %s", file, line, what);
+    else
+        snprintf(full, sizeof full, "%s: %s", file, what);
+    return keep_warning(p, full);
 }
 
 /* Keeps a copy of a file name for the scene's lifetime. */
@@ -486,8 +540,8 @@ static rp_status material_values(parser *p, const source *src, int line, char **
             else if (k > 0 && nm[k] <= nm[k - 1])
                 st = fail(p, src->name, line, "spectrum wavelengths are not ascending ('%.64s' after %g nm)", t,
                           nm[k - 1]);
-            else if (reflect && (val[k] < 0 || val[k] >= 1))
-                st = fail(p, src->name, line, "reflect %g at %g nm outside [0, 1)", val[k], nm[k]);
+            else if (reflect && (val[k] < 0 || val[k] > 1))
+                st = fail(p, src->name, line, "reflect %g at %g nm outside [0, 1]", val[k], nm[k]);
             else if (!reflect && val[k] < 0)
                 st = fail(p, src->name, line, "negative emit %g at %g nm", val[k], nm[k]);
         }
@@ -512,8 +566,8 @@ static rp_status material_values(parser *p, const source *src, int line, char **
         st = number(p, src, line, tok[first + k], &v);
         if (st)
             return st;
-        if (reflect && (v < 0 || v >= 1))
-            return fail(p, src->name, line, "reflect %g outside [0, 1)", v);
+        if (reflect && (v < 0 || v > 1))
+            return fail(p, src->name, line, "reflect %g outside [0, 1]", v);
         if (!reflect && v < 0)
             return fail(p, src->name, line, "negative emit %g", v);
         out[k] = v;
@@ -570,6 +624,9 @@ static rp_status st_material(parser *p, const source *src, int line, char **tok,
     const char *name = tok[1];
     if (find_material(s, name) != RP_NONE)
         return fail(p, src->name, line, "duplicate material name '%.64s'", name);
+    if (!strcmp(name, "mtl"))
+        return fail(p, src->name, line, "'mtl' cannot name a material: 'mesh NAME mtl FILE' means the OBJ's own "
+                                        "MTL materials");
     if (ntok == 2)
         return fail(p, src->name, line, "material '%.64s' has neither reflect nor emit", name);
     double *rho = calloc(2 * s->nbands, sizeof *rho);
@@ -608,17 +665,39 @@ static rp_status st_material(parser *p, const source *src, int line, char **tok,
     return st;
 }
 
-static rp_status st_camera(parser *p, const source *src, int line, char **tok, size_t ntok)
+/* NULL when c is a usable pinhole camera, else what is wrong (in buf). */
+static const char *camera_problem(const rp_camera *c, char *buf, size_t len)
 {
-    if (p->s->has_camera)
-        return fail(p, src->name, line, "second 'camera' statement (the first is at %s:%d)", p->camera_file,
-                    p->camera_line);
+    if (!rp_v3_isfinite(c->eye) || !rp_v3_isfinite(c->look) || !rp_v3_isfinite(c->up) || !isfinite(c->fov_deg))
+        return "camera has a non-finite number";
+    if (!(c->fov_deg > 0 && c->fov_deg < 180)) {
+        snprintf(buf, len, "camera fov %g degrees outside (0, 180)", c->fov_deg);
+        return buf;
+    }
+    if (c->width < 1 || c->height < 1 || c->width > MAX_IMAGE_SIZE || c->height > MAX_IMAGE_SIZE) {
+        snprintf(buf, len, "camera size %u x %u is not in [1, %d] pixels", c->width, c->height, MAX_IMAGE_SIZE);
+        return buf;
+    }
+    rp_vec3 dir = rp_v3_sub(c->look, c->eye);
+    double ld = rp_v3_length(dir), lu = rp_v3_length(c->up);
+    if (!(ld > 0))
+        return "camera eye and look are the same point";
+    if (!(lu > 0) || rp_v3_length(rp_v3_cross(dir, c->up)) <= 1e-9 * ld * lu)
+        return "camera up is zero or parallel to the view direction";
+    return NULL;
+}
+
+/* The camera words tok[first..ntok): eye X Y Z look X Y Z up X Y Z fov F
+ * size W H, each once, in any order. */
+static rp_status camera_words(parser *p, const source *src, int line, char **tok, size_t ntok, size_t first,
+                              rp_camera *out)
+{
     rp_camera c;
     memset(&c, 0, sizeof c);
     int seen[5] = {0, 0, 0, 0, 0};
     static const char *const keys[5] = {"eye", "look", "up", "fov", "size"};
     static const size_t arity[5] = {3, 3, 3, 1, 2};
-    size_t i = 1;
+    size_t i = first;
     while (i < ntok) {
         int k = 0;
         while (k < 5 && strcmp(tok[i], keys[k]))
@@ -661,16 +740,81 @@ static rp_status st_camera(parser *p, const source *src, int line, char **tok, s
     for (int k = 0; k < 5; k++)
         if (!seen[k])
             return fail(p, src->name, line, "camera lacks '%s'", keys[k]);
-    rp_vec3 dir = rp_v3_sub(c.look, c.eye);
-    double ld = rp_v3_length(dir), lu = rp_v3_length(c.up);
-    if (!(ld > 0))
-        return fail(p, src->name, line, "camera eye and look are the same point");
-    if (!(lu > 0) || rp_v3_length(rp_v3_cross(dir, c.up)) <= 1e-9 * ld * lu)
-        return fail(p, src->name, line, "camera up is zero or parallel to the view direction");
+    char buf[160];
+    const char *bad = camera_problem(&c, buf, sizeof buf);
+    if (bad)
+        return fail(p, src->name, line, "%s", bad);
+    *out = c;
+    return RP_OK;
+}
+
+static rp_status st_camera(parser *p, const source *src, int line, char **tok, size_t ntok)
+{
+    if (p->s->has_camera)
+        return fail(p, src->name, line, "second 'camera' statement (the first is at %s:%d)", p->camera_file,
+                    p->camera_line);
+    rp_camera c;
+    rp_status st = camera_words(p, src, line, tok, ntok, 1, &c);
+    if (st)
+        return st;
     p->s->camera = c;
     p->s->has_camera = 1;
     p->camera_file = src->name;
     p->camera_line = line;
+    return RP_OK;
+}
+
+rp_status rp_camera_parse(const char *words, const char *what, rp_camera *out, rp_error *err)
+{
+    if (!words || !out)
+        return rp_error_set(err, RP_ERR_INPUT, "rp_camera_parse: no words");
+    if (!what)
+        what = "camera";
+    char *copy = dup_string(words);
+    char **tok = NULL;
+    size_t ntok = 0, cap = 0;
+    parser p;
+    memset(&p, 0, sizeof p);
+    p.err = err;
+    if (!copy)
+        return nomem(&p);
+    rp_status st = RP_OK;
+    for (char *q = copy;;) {
+        while (*q && isspace((unsigned char)*q))
+            q++;
+        if (!*q)
+            break;
+        if (!grow((void **)&tok, &cap, ntok + 1, sizeof *tok)) {
+            st = nomem(&p);
+            break;
+        }
+        tok[ntok++] = q;
+        while (*q && !isspace((unsigned char)*q))
+            q++;
+        if (*q)
+            *q++ = '\0';
+    }
+    const source src = {what, NULL, 0};
+    if (!st && ntok == 0)
+        st = fail(&p, what, 0, "no camera words (eye X Y Z look X Y Z up X Y Z fov F size W H)");
+    /* A scene file's whole statement may be pasted, keyword and all. */
+    if (!st)
+        st = camera_words(&p, &src, 0, tok, ntok, strcmp(tok[0], "camera") == 0 ? 1 : 0, out);
+    free(tok);
+    free(copy);
+    return st;
+}
+
+rp_status rp_scene_set_camera(rp_scene *s, const rp_camera *cam, rp_error *err)
+{
+    if (!s || !cam)
+        return rp_error_set(err, RP_ERR_INPUT, "rp_scene_set_camera: no scene or camera");
+    char buf[160];
+    const char *bad = camera_problem(cam, buf, sizeof buf);
+    if (bad)
+        return rp_error_set(err, RP_ERR_INPUT, "%s", bad);
+    s->camera = *cam;
+    s->has_camera = 1;
     return RP_OK;
 }
 
@@ -874,10 +1018,311 @@ static rp_status st_box(parser *p, const source *src, int line, char **tok, size
     return st;
 }
 
+/* ---------------------------------------------------------------- meshes */
+
+/* Rec. ITU-R BT.709 luminance of linear RGB: how an MTL colour enters a
+ * grey scene (a reflectance in [0, 1] stays in [0, 1]). */
+static double luminance(const double *rgb)
+{
+    return 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+}
+
+/* Appends m's vertices moved to scale * p + t; *base is the first one's
+ * index.  Errors name src:line (the statement placing the mesh). */
+static rp_status mesh_vertices(parser *p, const source *src, int line, const char *path, const rp_tri_mesh *m,
+                               double scale, const double *t, uint32_t *base)
+{
+    rp_scene *s = p->s;
+    if (m->nvertices >= UINT32_MAX - 1 - s->nvertices)
+        return fail(p, src->name, line, "mesh '%.200s' has too many vertices", path);
+    *base = (uint32_t)s->nvertices;
+    for (size_t i = 0; i < m->nvertices; i++) {
+        uint32_t idx;
+        rp_vec3 v = rp_v3(scale * m->xyz[3 * i] + t[0], scale * m->xyz[3 * i + 1] + t[1],
+                          scale * m->xyz[3 * i + 2] + t[2]);
+        if (!rp_v3_isfinite(v))
+            return fail(p, src->name, line, "mesh '%.200s': vertex %zu is not finite", path, i);
+        rp_status st = add_vertex(p, v, &idx);
+        if (st)
+            return st;
+    }
+    for (size_t f = 0; f < 3 * m->ntriangles; f++)
+        if (m->tri[f] >= m->nvertices)
+            return fail(p, src->name, line, "mesh '%.200s': face %zu has a bad vertex index", path, f / 3);
+    return RP_OK;
+}
+
+/* 1 if triangle tr of m (its vertices from base on) has the area every
+ * face must have (face_check), which the reader's exact zero-area test
+ * does not guarantee. */
+static int mesh_triangle_ok(const rp_scene *s, const rp_tri_mesh *m, uint32_t base, size_t tr)
+{
+    rp_vec3 v[3], n;
+    double a;
+    char buf[16];
+    for (int k = 0; k < 3; k++)
+        v[k] = s->vertices[base + m->tri[3 * tr + k]];
+    return face_check(v, 3, &n, &a, buf, sizeof buf) == NULL;
+}
+
+/* The line of triangle tr's face in m's file (0: unknown). */
+static size_t mesh_line(const rp_tri_mesh *m, size_t tr)
+{
+    return m->tri_line ? m->tri_line[tr] : 0;
+}
+
+/* One warning per kind of face the reading dropped (path names m's file);
+ * dropped / dropped_line add the faces face_check refused here. */
+static rp_status mesh_drop_warnings(parser *p, const char *path, const rp_tri_mesh *m, size_t dropped,
+                                    size_t dropped_line)
+{
+    rp_status st = RP_OK;
+    for (size_t i = 0; !st && i < m->nwarnings; i++)
+        st = keep_warning(p, m->warnings[i]);
+    size_t nzero = m->degenerate_faces + dropped;
+    size_t zline = m->degenerate_line;
+    if (dropped_line > 0 && (zline == 0 || dropped_line < zline))
+        zline = dropped_line;
+    if (!st && nzero > 0)
+        st = add_warning(p, path, zline, "%zu zero-area face%s dropped (the first on this line)", nzero,
+                         nzero > 1 ? "s" : "");
+    if (!st && m->duplicate_faces > 0)
+        st = add_warning(p, path, m->duplicate_line,
+                         "%zu exact duplicate face%s dropped (the first on this line; same vertex positions "
+                         "and winding as an earlier face)",
+                         m->duplicate_faces, m->duplicate_faces > 1 ? "s" : "");
+    return st;
+}
+
+/* The surface name base, or base~2, base~3, ... if taken. */
+static void unique_surface_name(const rp_scene *s, const char *base, char *out, size_t len)
+{
+    snprintf(out, len, "%s", base);
+    for (unsigned k = 2; rp_scene_find_surface(s, out) != RP_NONE; k++)
+        snprintf(out, len, "%.*s~%u", (int)(len > 16 ? len - 16 : 0), base, k);
+}
+
+typedef struct obj_key {
+    uint32_t group, material, tri;
+} obj_key;
+
+static int obj_key_cmp(const void *a, const void *b)
+{
+    const obj_key *x = a, *y = b;
+    if (x->group != y->group)
+        return x->group < y->group ? -1 : 1;
+    if (x->material != y->material)
+        return x->material < y->material ? -1 : 1;
+    return x->tri < y->tri ? -1 : x->tri > y->tri;
+}
+
+/* Places an OBJ scene read by rp_obj_read_scene: its materials (named
+ * "prefix/name" when prefix is not NULL) and one surface per (group,
+ * material) pair, named after the group ("default" before any o/g), or
+ * "group.material" when the group mixes materials, with "prefix/" in
+ * front, and "~2", "~3" ... after a name already taken.  Vertices move to
+ * scale * p + t.  src:line is the statement that places it (the OBJ itself
+ * for an OBJ scene).  Faces keep their own winding: inconsistent
+ * orientation is a warning here, since an OBJ scene's faces are surfaces
+ * each author-oriented, not one closed skin. */
+static rp_status obj_place(parser *p, const source *src, int line, const char *file, const rp_tri_mesh *m,
+                           const char *prefix, double scale, const double *t)
+{
+    rp_scene *s = p->s;
+    if (m->ntriangles == 0)
+        return fail(p, file, 0, "no faces");
+    if (s->band_kind == RP_BANDS_SPECTRAL)
+        return fail(p, src->name, line,
+                    "'%.200s' has MTL materials, which are RGB; an RGB colour has no one spectrum, so they cannot "
+                    "enter this spectral scene (place it with 'mesh NAME MATERIAL FILE' and a spectral material)",
+                    file);
+    size_t nm = m->nmaterials;
+    uint32_t *mat_of = malloc((nm ? nm : 1) * sizeof *mat_of);
+    obj_key *keys = malloc((m->ntriangles ? m->ntriangles : 1) * sizeof *keys);
+    char *name = malloc(1024), *mname = malloc(1024);
+    rp_status st = RP_OK;
+    if (!mat_of || !keys || !name || !mname)
+        st = nomem(p);
+    for (size_t i = 0; !st && i < nm; i++) {
+        const char *mn = m->material_names && m->material_names[i] ? m->material_names[i] : "";
+        if (prefix)
+            snprintf(mname, 1024, "%s/%s", prefix, mn);
+        else
+            snprintf(mname, 1024, "%s", mn);
+        if (find_material(s, mname) != RP_NONE) {
+            st = fail(p, src->name, line, "material '%.200s' from '%.200s' is already declared", mname, file);
+            break;
+        }
+        const double *kd = m->material_kd + 3 * i, *ke = m->material_ke + 3 * i;
+        for (int c = 0; c < 3 && !st; c++)
+            if (!isfinite(kd[c]) || kd[c] < 0 || kd[c] > 1 || !isfinite(ke[c]) || ke[c] < 0)
+                st = fail(p, file, 0, "material '%.64s': Kd %g outside [0, 1] or Ke %g negative", mn, kd[c], ke[c]);
+        if (!st)
+            st = add_material(p, mname, &mat_of[i]);
+        if (st)
+            break;
+        rp_material *mat = &s->materials[mat_of[i]];
+        if (s->band_kind == RP_BANDS_GREY) {
+            *(double *)mat->rho = luminance(kd);
+            *(double *)mat->Le = luminance(ke);
+        } else {
+            memcpy((void *)mat->rho, kd, 3 * sizeof *kd);
+            memcpy((void *)mat->Le, ke, 3 * sizeof *ke);
+        }
+        material_finish(s, mat);
+    }
+    uint32_t base = 0;
+    if (!st)
+        st = mesh_vertices(p, src, line, file, m, scale, t, &base);
+    size_t nkeys = 0, dropped = 0, dropped_line = 0;
+    for (size_t tr = 0; !st && tr < m->ntriangles; tr++) {
+        uint32_t mat = m->tri_material ? m->tri_material[tr] : UINT32_MAX;
+        uint32_t g = m->tri_group ? m->tri_group[tr] : 0;
+        if (mat == UINT32_MAX || mat >= nm)
+            st = fail(p, file, mesh_line(m, tr), "face has no material (no usemtl before it): radpt needs "
+                      "Kd and Ke for every face and invents none");
+        else if (m->tri_group && g >= m->ngroups)
+            st = fail(p, file, mesh_line(m, tr), "face has a bad group index");
+        else if (!mesh_triangle_ok(s, m, base, tr)) {
+            if (dropped++ == 0)
+                dropped_line = mesh_line(m, tr);
+        } else
+            keys[nkeys++] = (obj_key){g, mat, (uint32_t)tr};
+    }
+    if (!st && nkeys == 0)
+        st = fail(p, file, 0, "every face is degenerate (zero area)");
+    if (!st)
+        qsort(keys, nkeys, sizeof *keys, obj_key_cmp);
+    for (size_t k = 0; !st && k < nkeys;) {
+        uint32_t g = keys[k].group, mat = keys[k].material;
+        /* Does group g use more than one material? Its keys are contiguous. */
+        size_t g0 = k, g1 = k;
+        while (g0 > 0 && keys[g0 - 1].group == g)
+            g0--;
+        while (g1 < nkeys && keys[g1].group == g)
+            g1++;
+        int mixed = keys[g0].material != keys[g1 - 1].material;
+        const char *gname =
+            m->group_names && g < m->ngroups && m->group_names[g] && m->group_names[g][0] ? m->group_names[g]
+                                                                                          : "default";
+        const char *mn = m->material_names[mat] ? m->material_names[mat] : "";
+        snprintf(mname, 1024, "%s%s%.400s%s%.400s", prefix ? prefix : "", prefix ? "/" : "", gname,
+                 mixed ? "." : "", mixed ? mn : "");
+        unique_surface_name(s, mname, name, 1024);
+        const source osrc = {file, NULL, 0};
+        st = begin_surface(p, &osrc, (int)mesh_line(m, keys[k].tri), name, s->materials[mat_of[mat]].name,
+                           RP_SURFACE_MESH);
+        for (; !st && k < nkeys && keys[k].group == g && keys[k].material == mat; k++) {
+            uint32_t tr = keys[k].tri;
+            uint32_t idx[3] = {base + m->tri[3 * tr], base + m->tri[3 * tr + 1], base + m->tri[3 * tr + 2]};
+            st = add_face(p, &osrc, (int)mesh_line(m, tr), idx, 3, NULL);
+        }
+    }
+    if (!st)
+        st = mesh_drop_warnings(p, file, m, dropped, dropped_line);
+    if (!st && m->orientation_conflicts > 0)
+        st = add_warning(p, file, m->orientation_line,
+                         "faces wound inconsistently: %zu edge%s used twice in the same direction (the first by "
+                         "the face on this line); each face keeps its own winding, its front being the side "
+                         "that reflects and emits",
+                         m->orientation_conflicts, m->orientation_conflicts > 1 ? "s" : "");
+    free(mat_of);
+    free(keys);
+    free(name);
+    free(mname);
+    return st;
+}
+
+/* `mesh NAME MATERIAL FILE`: one surface of one material.  Zero-area and
+ * duplicate faces are dropped with a warning; inconsistent orientation is
+ * an error, because one surface of one material is meant as one skin whose
+ * front is the side lit, and radpt will not guess which faces are the
+ * wrong way round (an OBJ scene, or `mesh NAME mtl FILE`, keeps each
+ * face's own winding instead). */
+static rp_status mesh_one_material(parser *p, const source *src, int line, const char *name, const char *mat,
+                                   const char *path, double scale, const double *t)
+{
+    rp_scene *s = p->s;
+    rp_tri_mesh m;
+    memset(&m, 0, sizeof m);
+    char msg[512] = "";
+    if (rp_cgal_read_mesh(path, 0, &m, msg, sizeof msg) != 0) {
+        rp_tri_mesh_free(&m);
+        return fail(p, src->name, line, "mesh: %s", msg[0] ? msg : path);
+    }
+    rp_status st = RP_OK;
+    if (m.orientation_conflicts > 0) {
+        char where[64] = "";
+        if (m.orientation_line > 0)
+            snprintf(where, sizeof where, ":%zu", m.orientation_line);
+        st = fail(p, src->name, line,
+                  "mesh '%.200s' is inconsistently oriented: %zu edge%s used twice in the same direction "
+                  "(first at %.200s%s); a one-material mesh is one surface whose faces must agree on their front",
+                  path, m.orientation_conflicts, m.orientation_conflicts > 1 ? "s" : "", path, where);
+    } else if (m.ntriangles == 0) {
+        st = fail(p, src->name, line, "mesh '%.200s' has no faces", path);
+    }
+    size_t nv = s->nvertices;
+    uint32_t base = 0;
+    if (!st)
+        st = mesh_vertices(p, src, line, path, &m, scale, t, &base);
+    size_t kept = 0, dropped = 0, dropped_line = 0;
+    char *keep = st ? NULL : calloc(m.ntriangles, 1);
+    if (!st && !keep)
+        st = nomem(p);
+    for (size_t f = 0; !st && f < m.ntriangles; f++) {
+        keep[f] = (char)mesh_triangle_ok(s, &m, base, f);
+        kept += (size_t)keep[f];
+        if (!keep[f] && dropped++ == 0)
+            dropped_line = mesh_line(&m, f);
+    }
+    if (!st && kept == 0)
+        st = fail(p, src->name, line, "mesh '%.200s': every face is degenerate (zero area)", path);
+    if (!st) {
+        st = begin_surface(p, src, line, name, mat, RP_SURFACE_MESH);
+        for (size_t f = 0; !st && f < m.ntriangles; f++) {
+            if (!keep[f])
+                continue;
+            uint32_t idx[3] = {base + m.tri[3 * f], base + m.tri[3 * f + 1], base + m.tri[3 * f + 2]};
+            char what[64];
+            snprintf(what, sizeof what, "mesh face %zu: ", f);
+            st = add_face(p, src, line, idx, 3, what);
+        }
+        if (st)
+            drop_last_surface(s, nv);
+    }
+    if (!st)
+        st = mesh_drop_warnings(p, path, &m, dropped, dropped_line);
+    else
+        s->nvertices = nv;
+    free(keep);
+    rp_tri_mesh_free(&m);
+    return st;
+}
+
+/* `mesh NAME mtl FILE.obj`: the OBJ with its own MTL materials. */
+static rp_status mesh_mtl(parser *p, const source *src, int line, const char *name, const char *path,
+                          double scale, const double *t)
+{
+    rp_tri_mesh m;
+    memset(&m, 0, sizeof m);
+    char msg[512] = "";
+    if (rp_obj_read_scene(path, &m, msg, sizeof msg) != 0) {
+        rp_tri_mesh_free(&m);
+        return fail(p, src->name, line, "mesh %.64s mtl: %s", name, msg[0] ? msg : path);
+    }
+    const char *file = keep_file_name(p, path);
+    rp_status st = file ? obj_place(p, src, line, file, &m, name, scale, t) : nomem(p);
+    rp_tri_mesh_free(&m);
+    return st;
+}
+
 static rp_status st_mesh(parser *p, const source *src, int line, char **tok, size_t ntok)
 {
     if (ntok < 4)
-        return fail(p, src->name, line, "'mesh' takes a name, a material, a path and [scale S] [translate X Y Z]");
+        return fail(p, src->name, line,
+                    "'mesh' takes a name, a material (or 'mtl' for the OBJ's own), a path and [scale S] "
+                    "[translate X Y Z]");
     double scale = 1, t[3] = {0, 0, 0};
     int seen_scale = 0, seen_translate = 0;
     rp_status st;
@@ -907,7 +1352,8 @@ static rp_status st_mesh(parser *p, const source *src, int line, char **tok, siz
         }
     }
     rp_scene *s = p->s;
-    if (find_material(s, tok[2]) == RP_NONE)
+    int mtl = !strcmp(tok[2], "mtl");
+    if (!mtl && find_material(s, tok[2]) == RP_NONE)
         return fail(p, src->name, line, "unknown material '%.64s'", tok[2]);
     char *path = join_path(src->dir, tok[3]);
     if (!path)
@@ -919,59 +1365,10 @@ static rp_status st_mesh(parser *p, const source *src, int line, char **tok, siz
         return st;
     }
     fclose(probe);
-    rp_tri_mesh m;
-    memset(&m, 0, sizeof m);
-    char msg[512] = "";
-    if (rp_cgal_read_mesh(path, 0, &m, msg, sizeof msg) != 0) {
-        st = fail(p, src->name, line, "mesh: %s", msg[0] ? msg : path);
-        rp_tri_mesh_free(&m);
-        free(path);
-        return st;
-    }
-    if (m.degenerate_faces > 0)
-        st = fail(p, src->name, line, "mesh '%.200s' has %zu degenerate (zero-area) faces", path, m.degenerate_faces);
-    else if (m.orientation_conflicts > 0)
-        st = fail(p, src->name, line,
-                  "mesh '%.200s' is inconsistently oriented (%zu edges used twice in the same direction)", path,
-                  m.orientation_conflicts);
-    else if (m.ntriangles == 0)
-        st = fail(p, src->name, line, "mesh '%.200s' has no faces", path);
-    size_t nv = s->nvertices;
-    if (!st)
-        st = begin_surface(p, src, line, tok[1], tok[2], RP_SURFACE_MESH);
-    if (!st) {
-        uint32_t base = (uint32_t)s->nvertices;
-        if (m.nvertices >= UINT32_MAX - s->nvertices)
-            st = fail(p, src->name, line, "mesh '%.200s' has too many vertices", path);
-        for (size_t i = 0; !st && i < m.nvertices; i++) {
-            uint32_t idx;
-            if (!isfinite(m.xyz[3 * i]) || !isfinite(m.xyz[3 * i + 1]) || !isfinite(m.xyz[3 * i + 2])) {
-                st = fail(p, src->name, line, "mesh '%.200s': vertex %zu is not finite", path, i);
-                break;
-            }
-            st = add_vertex(p, rp_v3(scale * m.xyz[3 * i] + t[0], scale * m.xyz[3 * i + 1] + t[1],
-                                     scale * m.xyz[3 * i + 2] + t[2]),
-                            &idx);
-        }
-        for (size_t f = 0; !st && f < m.ntriangles; f++) {
-            uint32_t idx[3];
-            for (int k = 0; k < 3; k++) {
-                if (m.tri[3 * f + k] >= m.nvertices) {
-                    st = fail(p, src->name, line, "mesh '%.200s': face %zu has a bad vertex index", path, f);
-                    break;
-                }
-                idx[k] = base + m.tri[3 * f + k];
-            }
-            if (!st) {
-                char what[64];
-                snprintf(what, sizeof what, "mesh face %zu: ", f);
-                st = add_face(p, src, line, idx, 3, what);
-            }
-        }
-        if (st)
-            drop_last_surface(s, nv);
-    }
-    rp_tri_mesh_free(&m);
+    if (mtl)
+        st = mesh_mtl(p, src, line, tok[1], path, scale, t);
+    else
+        st = mesh_one_material(p, src, line, tok[1], tok[2], path, scale, t);
     free(path);
     return st;
 }
@@ -1142,6 +1539,34 @@ static rp_status finish(parser *p, const char *name, int line)
     return RP_OK;
 }
 
+/* A closed scene that reflects everything in some band (reflect 1 on every
+ * surface) and emits in that band keeps all the light it makes: its
+ * radiance is infinite (the furnace's Le / (1 - rho)), so it is refused.
+ * Closedness is only tested when the reflectances call for it. */
+static rp_status finite_radiance(parser *p)
+{
+    rp_scene *s = p->s;
+    for (size_t b = 0; b < s->nbands; b++) {
+        int all = s->nsurfaces > 0, emits = 0;
+        for (size_t i = 0; i < s->nsurfaces; i++) {
+            const rp_material *m = &s->materials[s->surfaces[i].material];
+            all &= m->rho[b] >= 1;
+            emits |= m->Le[b] > 0;
+        }
+        if (all && emits && rp_scene_is_closed(s) == 1) {
+            const rp_surface *surf = &s->surfaces[0];
+            char band[32] = "";
+            if (s->nbands > 1)
+                snprintf(band, sizeof band, " in band %zu", b);
+            return fail(p, surf->file, surf->line,
+                        "the scene is closed, reflects everything%s (reflect 1 on every surface) and emits: its "
+                        "radiance is infinite (a furnace's Le / (1 - rho))",
+                        band);
+        }
+    }
+    return RP_OK;
+}
+
 static void parser_free(parser *p)
 {
     for (size_t i = 0; i < p->nstack; i++)
@@ -1179,6 +1604,8 @@ static rp_status parse_top(const char *text, const char *name, const char *dir, 
         st = parse_source(&p, copy, &src, &nlines);
     if (!st)
         st = finish(&p, src.name, nlines > 0 ? nlines : 1);
+    if (!st)
+        st = finite_radiance(&p);
     free(copy);
     free(dcopy);
     parser_free(&p);
@@ -1199,111 +1626,6 @@ rp_status rp_scene_parse(const char *text, const char *name, const char *dir, rp
 }
 
 /* ---------------------------------------------------------------- OBJ */
-
-typedef struct obj_key {
-    uint32_t group, material, tri;
-} obj_key;
-
-static int obj_key_cmp(const void *a, const void *b)
-{
-    const obj_key *x = a, *y = b;
-    if (x->group != y->group)
-        return x->group < y->group ? -1 : 1;
-    if (x->material != y->material)
-        return x->material < y->material ? -1 : 1;
-    return x->tri < y->tri ? -1 : x->tri > y->tri;
-}
-
-/* Each (group, material) pair becomes a surface, named after the group, or
- * "group.material" when the group mixes materials. */
-static rp_status obj_build(parser *p, const char *path, const rp_tri_mesh *m)
-{
-    rp_scene *s = p->s;
-    const source src = {path, NULL, 0};
-    s->band_kind = RP_BANDS_RGB;
-    s->nbands = 3;
-    if (m->degenerate_faces > 0)
-        return fail(p, path, 0, "%zu degenerate (zero-area) faces", m->degenerate_faces);
-    if (m->orientation_conflicts > 0)
-        return fail(p, path, 0, "inconsistently oriented (%zu edges used twice in the same direction)",
-                    m->orientation_conflicts);
-    if (m->ntriangles == 0)
-        return fail(p, path, 0, "no faces");
-    for (size_t i = 0; i < m->nmaterials; i++) {
-        const char *mname = m->material_names && m->material_names[i] ? m->material_names[i] : "";
-        if (find_material(s, mname) != RP_NONE)
-            return fail(p, path, 0, "duplicate material name '%.64s'", mname);
-        for (int c = 0; c < 3; c++) {
-            double kd = m->material_kd[3 * i + c], ke = m->material_ke[3 * i + c];
-            if (!isfinite(kd) || kd < 0 || kd >= 1)
-                return fail(p, path, 0, "material '%.64s': Kd %g outside [0, 1)", mname, kd);
-            if (!isfinite(ke) || ke < 0)
-                return fail(p, path, 0, "material '%.64s': Ke %g is negative or not finite", mname, ke);
-        }
-        uint32_t idx;
-        rp_status st = add_material(p, mname, &idx);
-        if (st)
-            return st;
-        memcpy((void *)s->materials[idx].rho, m->material_kd + 3 * i, 3 * sizeof(double));
-        memcpy((void *)s->materials[idx].Le, m->material_ke + 3 * i, 3 * sizeof(double));
-        material_finish(s, &s->materials[idx]);
-    }
-    for (size_t i = 0; i < m->nvertices; i++) {
-        uint32_t idx;
-        rp_vec3 v = rp_v3(m->xyz[3 * i], m->xyz[3 * i + 1], m->xyz[3 * i + 2]);
-        if (!rp_v3_isfinite(v))
-            return fail(p, path, 0, "vertex %zu is not finite", i);
-        rp_status st = add_vertex(p, v, &idx);
-        if (st)
-            return st;
-    }
-    obj_key *keys = malloc(m->ntriangles * sizeof *keys);
-    if (!keys)
-        return nomem(p);
-    rp_status st = RP_OK;
-    for (size_t t = 0; !st && t < m->ntriangles; t++) {
-        keys[t].group = m->tri_group ? m->tri_group[t] : 0;
-        keys[t].material = m->tri_material ? m->tri_material[t] : UINT32_MAX;
-        keys[t].tri = (uint32_t)t;
-        if (keys[t].material == UINT32_MAX || keys[t].material >= m->nmaterials)
-            st = fail(p, path, 0, "face %zu has no material (radpt needs Kd/Ke for every face)", t);
-        else if (m->tri_group && keys[t].group >= m->ngroups)
-            st = fail(p, path, 0, "face %zu has a bad group index", t);
-        for (int k = 0; !st && k < 3; k++)
-            if (m->tri[3 * t + k] >= m->nvertices)
-                st = fail(p, path, 0, "face %zu has a bad vertex index", t);
-    }
-    if (!st)
-        qsort(keys, m->ntriangles, sizeof *keys, obj_key_cmp);
-    size_t t = 0;
-    while (!st && t < m->ntriangles) {
-        uint32_t g = keys[t].group, mat = keys[t].material;
-        /* Does group g use more than one material? Its keys are contiguous. */
-        size_t g0 = t, g1 = t;
-        while (g0 > 0 && keys[g0 - 1].group == g)
-            g0--;
-        while (g1 < m->ntriangles && keys[g1].group == g)
-            g1++;
-        int mixed = keys[g0].material != keys[g1 - 1].material;
-        const char *gname = m->group_names && g < m->ngroups && m->group_names[g] && m->group_names[g][0]
-                                ? m->group_names[g]
-                                : "default";
-        char name[512];
-        if (mixed)
-            snprintf(name, sizeof name, "%s.%s", gname, s->materials[mat].name);
-        else
-            snprintf(name, sizeof name, "%s", gname);
-        st = begin_surface(p, &src, 0, name, s->materials[mat].name, RP_SURFACE_MESH);
-        for (; !st && t < m->ntriangles && keys[t].group == g && keys[t].material == mat; t++) {
-            uint32_t idx[3] = {m->tri[3 * keys[t].tri], m->tri[3 * keys[t].tri + 1], m->tri[3 * keys[t].tri + 2]};
-            char what[96];
-            snprintf(what, sizeof what, "surface '%.40s', face %u: ", name, keys[t].tri);
-            st = add_face(p, &src, 0, idx, 3, what);
-        }
-    }
-    free(keys);
-    return st;
-}
 
 static int ends_with_obj(const char *path)
 {
@@ -1331,10 +1653,16 @@ static rp_status load_obj(const char *path, rp_scene **out, rp_error *err)
     rp_status st = RP_OK;
     if (rp_obj_read_scene(path, &m, msg, sizeof msg) != 0)
         st = rp_error_set(err, RP_ERR_INPUT, "%s", msg[0] ? msg : "cannot read the OBJ scene");
+    const source src = {name, NULL, 0};
+    const double origin[3] = {0, 0, 0};
+    p.s->band_kind = RP_BANDS_RGB;
+    p.s->nbands = 3;
     if (!st)
-        st = obj_build(&p, name, &m);
+        st = obj_place(&p, &src, 0, name, &m, NULL, 1, origin);
     if (!st)
         st = finish(&p, name, 0);
+    if (!st)
+        st = finite_radiance(&p);
     rp_tri_mesh_free(&m);
     if (st) {
         rp_scene_destroy(p.s);
@@ -1413,6 +1741,10 @@ int rp_material_pure_emitter(const rp_material *m, size_t nb)
 }
 
 const rp_camera *rp_scene_camera(const rp_scene *s) { return s->has_camera ? &s->camera : NULL; }
+
+size_t rp_scene_nwarnings(const rp_scene *s) { return s->nwarnings; }
+
+const char *rp_scene_warning(const rp_scene *s, size_t i) { return i < s->nwarnings ? s->warnings[i] : NULL; }
 
 uint32_t rp_scene_find_surface(const rp_scene *s, const char *name)
 {

@@ -4,7 +4,9 @@
  * surface with one diffuse material (reflectance rho and emitted radiance Le
  * per spectral band), and an optional pinhole camera.  Surfaces are
  * one-sided: the back of a face is black.  The scene is immutable once
- * loaded; every accessor returns borrowed, read-only data. */
+ * loaded, except its camera (rp_scene_set_camera, to be called before
+ * anything hashes the scene or reads its camera); every accessor returns
+ * borrowed, read-only data. */
 #ifndef RP_SCENE_H
 #define RP_SCENE_H
 
@@ -26,7 +28,7 @@ typedef enum rp_band_kind {
 
 typedef struct rp_material {
     const char *name;
-    const double *rho;  /* diffuse reflectance per band, in [0, 1) */
+    const double *rho;  /* diffuse reflectance per band, in [0, 1] */
     const double *Le;   /* emitted radiance per band, >= 0 */
     int emitter;        /* some band of Le is > 0 */
 } rp_material;
@@ -67,7 +69,9 @@ typedef struct rp_camera {
 
 /* Loads a scene file (format 1) or a Wavefront OBJ (with its MTL) when the
  * name ends in ".obj".  On failure returns RP_ERR_INPUT (bad scene) or
- * RP_ERR_RUNTIME/RP_ERR_NOMEM, with "FILE:LINE: what is wrong" in err. */
+ * RP_ERR_RUNTIME/RP_ERR_NOMEM, with "FILE:LINE: what is wrong" in err.
+ * What was read but not used (dropped faces, ignored MTL statements, ...)
+ * is kept as warnings: rp_scene_warning. */
 rp_status rp_scene_load(const char *path, rp_scene **out, rp_error *err);
 
 /* Parses scene text held in memory; name is used in messages and relative
@@ -99,6 +103,23 @@ int rp_material_pure_emitter(const rp_material *m, size_t nb);
 
 /* NULL when the scene declares no camera. */
 const rp_camera *rp_scene_camera(const rp_scene *scene);
+
+/* Gives the scene a camera, or replaces its own (the camera is part of the
+ * scene hash, so set it before hashing).  RP_ERR_INPUT if cam is not a
+ * usable pinhole camera (eye = look, up parallel to the view, fov outside
+ * (0, 180), size outside [1, 65536]). */
+rp_status rp_scene_set_camera(rp_scene *scene, const rp_camera *cam, rp_error *err);
+
+/* Parses camera words, the scene format's camera statement without (or
+ * with) its keyword: "eye X Y Z look X Y Z up X Y Z fov F size W H", each
+ * once, in any order.  what names the source in messages ("--camera:
+ * camera lacks 'fov'").  Same code and checks as the `camera` statement. */
+rp_status rp_camera_parse(const char *words, const char *what, rp_camera *out, rp_error *err);
+
+/* Warnings found while reading, each "FILE:LINE: what" (what was dropped
+ * or ignored, and where); i < rp_scene_nwarnings, NULL otherwise. */
+size_t rp_scene_nwarnings(const rp_scene *scene);
+const char *rp_scene_warning(const rp_scene *scene, size_t i);
 
 /* Index of the surface with that name, or RP_NONE. */
 uint32_t rp_scene_find_surface(const rp_scene *scene, const char *name);

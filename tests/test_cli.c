@@ -229,3 +229,274 @@ Test(cli, hierarchical_reports_leaves_and_links)
         cr_expect(strstr(r.err, want[k]) != NULL, "stderr lacks '%s': %s", want[k], r.err);
     rp_run_free(&r);
 }
+
+/* ------------------------------------------------------ OBJ scenes, --camera */
+
+#define MCGUIRE "tests/data/CornellBox-Original.obj"
+
+/* The n-th (0-based) occurrence of needle in s, or NULL. */
+static const char *nth(const char *s, const char *needle, int n)
+{
+    const char *p = strstr(s, needle);
+    while (p && n-- > 0)
+        p = strstr(p + 1, needle);
+    return p;
+}
+
+static int count_of(const char *s, const char *needle)
+{
+    int n = 0;
+    while (nth(s, needle, n))
+        n++;
+    return n;
+}
+
+/* The words inside --camera "..." in text, into buf. */
+static int camera_words_in(const char *text, char *buf, size_t len)
+{
+    const char *p = strstr(text, "--camera \"");
+    if (!p)
+        return 0;
+    p += strlen("--camera \"");
+    const char *q = strchr(p, '"');
+    if (!q || (size_t)(q - p) >= len)
+        return 0;
+    memcpy(buf, p, (size_t)(q - p));
+    buf[q - p] = '\0';
+    return 1;
+}
+
+/* The 16 hex digits after "key": " in a JSON text. */
+static void json_hash(const char *json, const char *key, char out[17])
+{
+    char pat[64];
+    snprintf(pat, sizeof pat, "\"%s\": \"", key);
+    const char *p = strstr(json, pat);
+    cr_assert_not_null(p, "no %s in %s", key, json);
+    memcpy(out, p + strlen(pat), 16);
+    out[16] = '\0';
+}
+
+/* Every command that loads a scene takes an OBJ directly; the ones that
+ * need a camera use the default one and say which, as --camera words. */
+Test(cli, obj_scene_on_every_command)
+{
+    char dir[] = "/tmp/radpt-obj-XXXXXX";
+    cr_assert_not_null(mkdtemp(dir));
+    char args[1024];
+    const char *cmds[] = {
+        "info " MCGUIRE,
+        "probe " MCGUIRE " --method pathtrace --surface-averages --samples 64",
+        "formfactor " MCGUIRE " --from light --to floor --method montecarlo --samples 1000",
+        "render " MCGUIRE " --method pathtrace --spp 1 -o @/r.exr",
+        "reference " MCGUIRE " --spp 1 --samples 64 --cache @/refs",
+        "bench " MCGUIRE " --methods pathtrace:spp=1 --budget 0.2 --checkpoints 1 --seeds 1 --reference-spp 1 "
+        "--reference-samples 64 --cache @/refs -o @/bench",
+        "throughput " MCGUIRE " --spp 1 --rays 1000",
+        "samplers " MCGUIRE " --spp 1 --reference-spp 2 --seeds 1",
+    };
+    const int needs_camera[] = {0, 0, 0, 1, 1, 1, 1, 1};
+    for (size_t i = 0; i < sizeof cmds / sizeof *cmds; i++) {
+        /* @ stands for the directory */
+        size_t n = 0;
+        for (const char *c = cmds[i]; *c && n + 64 < sizeof args; c++)
+            n += (size_t)(*c == '@' ? snprintf(args + n, sizeof args - n, "%s", dir)
+                                    : snprintf(args + n, sizeof args - n, "%c", *c));
+        rp_run r = rp_run_radpt(args);
+        cr_expect_eq(r.status, 0, "'%s' exited %d: %s", args, r.status, r.err);
+        /* the .mtl's two warnings, once each */
+        cr_expect_eq(count_of(r.err, "radpt: warning: tests/data/CornellBox-Original.mtl:"), 2, "'%s': %s", args,
+                     r.err);
+        cr_expect_eq(strstr(r.err, "using the default, which is --camera \"") != NULL, needs_camera[i],
+                     "'%s': %s", args, r.err);
+        rp_run_free(&r);
+    }
+    snprintf(args, sizeof args, "rm -rf '%s'", dir);
+    cr_expect_eq(system(args), 0);
+}
+
+/* The printed default camera, given back with --camera, is the same
+ * camera: the reference's scene hash (which includes the camera) matches
+ * info's for the scene with that --camera, and differs without it. */
+Test(cli, default_camera_printed_and_given_back)
+{
+    char dir[] = "/tmp/radpt-cam-XXXXXX";
+    cr_assert_not_null(mkdtemp(dir));
+    char args[1024], words[512], h_ref[17], h_cam[17], h_none[17];
+    snprintf(args, sizeof args, "reference " MCGUIRE " --spp 1 --samples 16 --cache %s --json", dir);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_assert(camera_words_in(r.err, words, sizeof words), "no --camera words in: %s", r.err);
+    json_hash(r.out, "scene_hash", h_ref);
+    rp_run_free(&r);
+    snprintf(args, sizeof args, "info " MCGUIRE " --json --camera \"%s\"", words);
+    r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    json_hash(r.out, "hash", h_cam);
+    cr_expect(strstr(r.out, "\"fov_deg\": 40,") != NULL, "%s", r.out);
+    rp_run_free(&r);
+    r = rp_run_radpt("info " MCGUIRE " --json");
+    json_hash(r.out, "hash", h_none);
+    /* info needs no camera: none set, the default one shown */
+    cr_expect(strstr(r.out, "\"camera\": null") != NULL);
+    cr_expect(strstr(r.out, words) != NULL, "default_camera '%s' not in %s", words, r.out);
+    rp_run_free(&r);
+    cr_expect_str_eq(h_ref, h_cam);
+    cr_expect_str_neq(h_ref, h_none);
+    snprintf(args, sizeof args, "rm -rf '%s'", dir);
+    cr_expect_eq(system(args), 0);
+}
+
+/* --camera replaces a scene's own camera. */
+Test(cli, camera_overrides)
+{
+    rp_run r = rp_run_radpt("info scenes/cornell.scene --json");
+    char h0[17], h1[17];
+    json_hash(r.out, "hash", h0);
+    rp_run_free(&r);
+    r = rp_run_radpt("info scenes/cornell.scene --json --camera 'eye 1 2 3 look 1 2 4 up 0 1 0 fov 30 size 64 32'");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect(strstr(r.out, "\"camera\": {\"eye\": [1, 2, 3], \"look\": [1, 2, 4], \"up\": [0, 1, 0], "
+                            "\"fov_deg\": 30, \"width\": 64, \"height\": 32}") != NULL,
+              "%s", r.out);
+    json_hash(r.out, "hash", h1);
+    cr_expect_str_neq(h0, h1);
+    rp_run_free(&r);
+    /* and the render is that camera's size */
+    unlink("/tmp/rp_cli_camera.exr");
+    r = rp_run_radpt("render scenes/furnace.scene --method pathtrace --spp 1 --camera "
+                     "'eye 0.5 0.5 0.5 look 0.5 0.5 0 up 0 1 0 fov 60 size 12 7' -o /tmp/rp_cli_camera.exr");
+    cr_expect_eq(r.status, 0, "%s", r.err);
+    cr_expect(strstr(r.out, "12 x 7") != NULL, "%s", r.out);
+    rp_run_free(&r);
+    unlink("/tmp/rp_cli_camera.exr");
+}
+
+Test(cli, bad_camera_words_exit_2)
+{
+    const char *cases[] = {
+        "info scenes/cornell.scene --camera 'eye 1 2'",
+        "info scenes/cornell.scene --camera ''",
+        "probe scenes/cornell.scene --method pathtrace --surface-averages --camera 'eye 0 0 0 look 0 0 0 up 0 1 0 "
+        "fov 40 size 8 8'",
+        "render scenes/cornell.scene --method pathtrace --camera 'eye 0 0 0 look 0 0 1 up 0 1 0 fov 200 size 8 8' "
+        "-o /tmp/radpt-bad.exr",
+        "formfactor scenes/plates-parallel.scene --from emitter --to receiver --camera 'fov 40'",
+        "reference scenes/cornell.scene --camera 'eye 0 0 0 look 0 0 1 up 0 1 0 fov 40 size 8 8 roll 3'",
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        rp_run r = rp_run_radpt(cases[i]);
+        cr_expect_eq(r.status, 2, "'%s' exited %d", cases[i], r.status);
+        cr_expect(strncmp(r.err, "radpt: --camera: ", 17) == 0, "'%s': %s", cases[i], r.err);
+        cr_expect_eq(rp_count_lines(r.err), 1, "'%s': %s", cases[i], r.err);
+        rp_run_free(&r);
+    }
+    cr_expect(access("/tmp/radpt-bad.exr", F_OK) != 0);
+}
+
+/* Names with a space are quoted in info's columns, plain in JSON; every
+ * warning is printed once and listed in JSON. */
+Test(cli, names_quoted_warnings_listed)
+{
+    rp_run r = rp_run_radpt("info tests/data/names.obj");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect(strstr(r.out, "\n\"left wall\" ") != NULL, "%s", r.out);
+    cr_expect(strstr(r.out, "\na.white~2 ") != NULL, "%s", r.out);
+    rp_run_free(&r);
+    r = rp_run_radpt("info tests/data/names.obj --json");
+    cr_expect(strstr(r.out, "{\"name\": \"left wall\", \"material\": \"white\"") != NULL, "%s", r.out);
+    rp_run_free(&r);
+    r = rp_run_radpt("info tests/data/drops.obj --json");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect_eq(count_of(r.err, "radpt: warning: tests/data/drops.obj:"), 3, "%s", r.err);
+    cr_expect_eq(rp_count_lines(r.err), 3, "%s", r.err);
+    const char *w = strstr(r.out, "\"warnings\": [");
+    cr_assert_not_null(w, "%s", r.out);
+    cr_expect(strstr(w, "\"tests/data/drops.obj:20: 2 exact duplicate faces dropped") != NULL, "%s", w);
+    cr_expect(strstr(w, "\"tests/data/drops.obj:26: 2 zero-area faces dropped") != NULL, "%s", w);
+    rp_run_free(&r);
+}
+
+/* An OBJ's groups are surfaces the command line can name: scene.obj's floor
+ * and lamp are directly opposed unit squares 1 apart, whose form factor is
+ * Howell's C-11 with a = b = c = 1 (data/ground-truth.md). */
+Test(cli, formfactor_between_obj_groups)
+{
+    rp_run r = rp_run_radpt("formfactor tests/data/scene.obj --from floor --to lamp --method analytic --json");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    double f = rp_json_number_after(r.out, "{", "form_factor");
+    cr_expect(fabs(f - 0.1998248957) < 1e-6, "F = %.10g: %s", f, r.out);
+    rp_run_free(&r);
+}
+
+/* An OBJ furnace: a closed cube, Kd 0.5 and Ke 1 on every face (one value:
+ * grey), so L = Le / (1 - rho) = 2 in every band.  The reference is exact;
+ * the path tracer's surface average lies within 4 standard errors. */
+Test(cli, obj_furnace_closed_form)
+{
+    char dir[] = "/tmp/radpt-furnace-XXXXXX", args[512];
+    cr_assert_not_null(mkdtemp(dir));
+    snprintf(args, sizeof args, "reference tests/data/furnace-cube.obj --cache %s --json", dir);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect(strstr(r.out, "\"kind\": \"exact\"") != NULL, "%s", r.out);
+    cr_expect(strstr(r.out, "\"radiance\": [2, 2, 2]") != NULL, "%s", r.out);
+    rp_run_free(&r);
+    snprintf(args, sizeof args, "rm -rf '%s'", dir);
+    cr_expect_eq(system(args), 0);
+
+    r = rp_run_radpt("probe tests/data/furnace-cube.obj --method pathtrace --surface-averages --samples 4096 "
+                     "--seed 3 --json");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    const char *p = strstr(r.out, "\"radiance\": [");
+    const char *q = strstr(r.out, "\"stderr\": [");
+    cr_assert(p && q, "%s", r.out);
+    p += strlen("\"radiance\": [");
+    q += strlen("\"stderr\": [");
+    for (int b = 0; b < 3; b++) {
+        char *e1, *e2;
+        double L = strtod(p, &e1), se = strtod(q, &e2);
+        cr_expect(fabs(L - 2) <= 4 * se + 1e-12, "band %d: L = %g +- %g, not 2", b, L, se);
+        cr_expect_gt(se, 0);
+        p = e1 + 1;
+        q = e2 + 1;
+    }
+    rp_run_free(&r);
+}
+
+/* McGuire's box: the path tracer's surface averages agree with radiosity
+ * (Gauss-Seidel, 400 elements, an independent method on the same scene)
+ * within 4 of the path tracer's standard errors plus 2% of the value (the
+ * radiosity mesh's own error), and the light, which emits 17 12 4 and
+ * reflects 0.78, shows more than its emission by many standard errors. */
+Test(cli, mcguire_box_path_tracer_agrees_with_radiosity)
+{
+    rp_run pt = rp_run_radpt("probe " MCGUIRE " --method pathtrace --surface-averages --samples 16384 --json");
+    rp_run gs = rp_run_radpt("probe " MCGUIRE " --method gauss-seidel --elements 400 --surface-averages --json");
+    cr_assert_eq(pt.status, 0, "%s", pt.err);
+    cr_assert_eq(gs.status, 0, "%s", gs.err);
+    const char *names[] = {"floor", "ceiling", "backWall", "rightWall", "leftWall", "light"};
+    for (size_t i = 0; i < sizeof names / sizeof *names; i++) {
+        char anchor[64];
+        snprintf(anchor, sizeof anchor, "{\"name\": \"%s\"", names[i]);
+        const char *a = strstr(pt.out, anchor), *b = strstr(gs.out, anchor);
+        cr_assert(a && b, "%s missing", names[i]);
+        a = strstr(a, "\"radiance\": [") + 13;
+        b = strstr(b, "\"radiance\": [") + 13;
+        const char *s = strstr(a, "\"stderr\": [") + 11;
+        for (int k = 0; k < 3; k++) {
+            char *ea, *eb, *es;
+            double x = strtod(a, &ea), y = strtod(b, &eb), se = strtod(s, &es);
+            cr_expect(fabs(x - y) <= 4 * se + 0.02 * y, "%s band %d: path tracer %g +- %g, radiosity %g", names[i],
+                      k, x, se, y);
+            cr_expect_gt(x, 0, "%s band %d is black", names[i], k);
+            if (!strcmp(names[i], "light")) {
+                const double le[3] = {17, 12, 4};
+                cr_expect_gt(x - le[k], 10 * se, "light band %d: %g +- %g reflects nothing beyond Le", k, x, se);
+            }
+            a = ea + 1, b = eb + 1, s = es + 1;
+        }
+    }
+    rp_run_free(&pt);
+    rp_run_free(&gs);
+}

@@ -7,6 +7,7 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -320,5 +321,156 @@ Test(import, bunny)
     cr_expect_eq(m.ntriangles + m.degenerate_faces, 75408);
     for (size_t i = 0; i < 3 * m.ntriangles; i++)
         cr_assert_lt(m.tri[i], m.nvertices);
+    rp_tri_mesh_free(&m);
+}
+
+/* ------------------------------------------------ OBJ + MTL, as specified */
+
+/* The number of the first line of a tests/data file containing needle:
+ * where the file itself says a statement is, found without the reader. */
+static size_t line_of(const char *file, const char *needle)
+{
+    char path[1024], buf[1024];
+    snprintf(path, sizeof path, DATA "%s", file);
+    FILE *f = fopen(path, "r");
+    cr_assert_not_null(f, "cannot open %s", path);
+    size_t n = 0, found = 0;
+    while (!found && fgets(buf, sizeof buf, f)) {
+        n++;
+        if (strstr(buf, needle))
+            found = n;
+    }
+    fclose(f);
+    cr_assert_gt(found, 0, "%s has no line with '%s'", file, needle);
+    return found;
+}
+
+/* The first warning of m containing needle, or NULL. */
+static const char *warning_with(const rp_tri_mesh *m, const char *needle)
+{
+    for (size_t i = 0; i < m->nwarnings; i++)
+        if (strstr(m->warnings[i], needle))
+            return m->warnings[i];
+    return NULL;
+}
+
+/* MTL (Wavefront, appendix B2): "Kd r g b ... g and b are optional; if
+ * only r is specified, then g and b are assumed to be equal to r".  Kd 1
+ * is a perfect reflector, inside the range [0, 1]. */
+Test(import, mtl_one_value_is_grey_and_kd_1_accepted)
+{
+    rp_tri_mesh m;
+    char msg[512];
+    cr_assert_eq(rp_obj_read_scene(DATA "mtl-values.obj", &m, msg, sizeof msg), 0, "%s", msg);
+    cr_assert_eq(m.nmaterials, 3);
+    size_t grey = find_name(m.material_names, 3, "grey"), mirror = find_name(m.material_names, 3, "mirror"),
+           lamp = find_name(m.material_names, 3, "lamp");
+    cr_assert(grey != SIZE_MAX && mirror != SIZE_MAX && lamp != SIZE_MAX);
+    for (int c = 0; c < 3; c++) {
+        cr_expect_eq(m.material_kd[3 * grey + c], 0.7, "Kd 0.7 band %d: %g", c, m.material_kd[3 * grey + c]);
+        cr_expect_eq(m.material_ke[3 * grey + c], 0.0);
+        cr_expect_eq(m.material_kd[3 * mirror + c], 1.0);
+        cr_expect_eq(m.material_kd[3 * lamp + c], 0.78);
+        cr_expect_eq(m.material_ke[3 * lamp + c], 5.0, "Ke 5 band %d: %g", c, m.material_ke[3 * lamp + c]);
+    }
+    /* Ka is not read: listed, with its line and its count. */
+    char where[64];
+    snprintf(where, sizeof where, "mtl-values.mtl:%zu:", line_of("mtl-values.mtl", "Ka"));
+    const char *w = warning_with(&m, where);
+    cr_expect_not_null(w, "no warning at %s", where);
+    cr_expect(w && strstr(w, "ignored: Ka (1 material)"), "%s", w ? w : "");
+    rp_tri_mesh_free(&m);
+}
+
+Test(import, mtl_errors_name_the_mtl_file_and_line)
+{
+    char want[128];
+    snprintf(want, sizeof want, "mtl-kd-high.mtl:%zu: Kd 1.2 outside [0, 1]", line_of("mtl-kd-high.mtl", "Kd 0.5 1.2"));
+    expect_error(1, DATA "mtl-kd-high.obj", want);
+    snprintf(want, sizeof want, "mtl-kd-word.mtl:%zu: Kd: 'half' is not a number", line_of("mtl-kd-word.mtl", "Kd 0.5 half"));
+    expect_error(1, DATA "mtl-kd-word.obj", want);
+    snprintf(want, sizeof want, "scene_nomtl.obj:%zu: material library", line_of("scene_nomtl.obj", "mtllib"));
+    expect_error(1, DATA "scene_nomtl.obj", want);
+    snprintf(want, sizeof want, "scene_badmtl.obj:%zu: usemtl 'chrome'", line_of("scene_badmtl.obj", "usemtl"));
+    expect_error(1, DATA "scene_badmtl.obj", want);
+}
+
+/* drops.obj says in its comments what it holds: a floor quad, two exact
+ * copies of it (one rotated), its reverse (kept), two zero-area faces, a
+ * lamp, and vt / vn / s statements. */
+Test(import, duplicates_and_zero_area_faces_dropped_with_lines)
+{
+    rp_tri_mesh m;
+    char msg[512];
+    cr_assert_eq(rp_obj_read_scene(DATA "drops.obj", &m, msg, sizeof msg), 0, "%s", msg);
+    cr_expect_eq(m.duplicate_faces, 2);
+    cr_expect_eq(m.duplicate_line, line_of("drops.obj", "f 1/1/1"));
+    cr_expect_eq(m.degenerate_faces, 2);
+    cr_expect_eq(m.degenerate_line, line_of("drops.obj", "f 1 2 5"));
+    /* floor, its reverse and the lamp: three unit squares, two triangles each */
+    cr_expect_eq(m.ntriangles, 6);
+    cr_expect_float_eq(total_area(&m), 3.0, 1e-15);
+    /* the reverse copy runs the floor's edges the other way: no conflict */
+    cr_expect_eq(m.orientation_conflicts, 0);
+    char where[64];
+    snprintf(where, sizeof where, "drops.obj:%zu:", line_of("drops.obj", "vt 0 0"));
+    const char *w = warning_with(&m, where);
+    cr_expect_not_null(w, "no warning at %s", where);
+    cr_expect(w && strstr(w, "ignored: vt (2 lines), vn (1), s (1)"), "%s", w ? w : "");
+    for (size_t t = 0; t < m.ntriangles; t++)
+        cr_expect_gt(m.tri_line[t], 0);
+    rp_tri_mesh_free(&m);
+}
+
+Test(import, orientation_conflict_counted_with_line)
+{
+    rp_tri_mesh m;
+    char msg[512];
+    cr_assert_eq(rp_obj_read_scene(DATA "conflict.obj", &m, msg, sizeof msg), 0, "%s", msg);
+    cr_expect_eq(m.orientation_conflicts, 1);
+    cr_expect_eq(m.orientation_line, line_of("conflict.obj", "f 1 2 5 6"));
+    rp_tri_mesh_free(&m);
+}
+
+/* McGuire's CornellBox-Original (public domain, tests/data): eight groups,
+ * eight materials as its .mtl writes them, and one warning per kind of
+ * thing radpt does not read. */
+Test(import, mcguire_cornell_box)
+{
+    rp_tri_mesh m;
+    char msg[512];
+    cr_assert_eq(rp_obj_read_scene(DATA "CornellBox-Original.obj", &m, msg, sizeof msg), 0, "%s", msg);
+    cr_expect_eq(m.ngroups, 8);
+    cr_expect_eq(m.nmaterials, 8);
+    cr_expect_eq(m.duplicate_faces, 0);
+    cr_expect_eq(m.degenerate_faces, 0);
+    size_t light = find_name(m.material_names, m.nmaterials, "light");
+    cr_assert_neq(light, SIZE_MAX);
+    const double ke[3] = {17, 12, 4};
+    for (int c = 0; c < 3; c++) {
+        cr_expect_eq(m.material_kd[3 * light + c], 0.78);
+        cr_expect_eq(m.material_ke[3 * light + c], ke[c]);
+    }
+    char where[64];
+    snprintf(where, sizeof where, "CornellBox-Original.mtl:%zu:", line_of("CornellBox-Original.mtl", "Ns"));
+    const char *w = warning_with(&m, where);
+    cr_expect(w && strstr(w, "ignored: Ns (8 materials), Ni (8), illum (8), Ka (8), Ks (8)"), "%s", w ? w : where);
+    snprintf(where, sizeof where, "CornellBox-Original.mtl:%zu:", line_of("CornellBox-Original.mtl", "Ks 0.725"));
+    w = warning_with(&m, where);
+    cr_expect(w && strstr(w, "shortBox, tallBox have Kd 0 but a non-zero Ks"), "%s", w ? w : where);
+    cr_expect_eq(m.nwarnings, 2);
+    rp_tri_mesh_free(&m);
+}
+
+/* A one-material mesh drops zero-area faces too (OFF: located by line). */
+Test(import, mesh_zero_area_face_dropped_with_line)
+{
+    rp_tri_mesh m;
+    char msg[512];
+    cr_assert_eq(rp_cgal_read_mesh(DATA "degenerate-tetra.off", 0, &m, msg, sizeof msg), 0, "%s", msg);
+    cr_expect_eq(m.degenerate_faces, 1);
+    cr_expect_eq(m.degenerate_line, line_of("degenerate-tetra.off", "3 0 1 4"));
+    cr_expect_eq(m.ntriangles, 4);
+    cr_expect_eq(m.orientation_conflicts, 0, "the dropped face's edge 0-1 is not counted");
     rp_tri_mesh_free(&m);
 }

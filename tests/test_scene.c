@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "geometry/default_camera.h"
 #include "geometry/scene.h"
 
 #ifndef RP_SOURCE_DIR
@@ -643,8 +644,8 @@ Test(scene, refusals_from_text)
 {
     const char *light = "material lamp emit 1\nquad light lamp  0 1 0  1 1 0  1 1 1  0 1 1\n";
     char text[512];
-    snprintf(text, sizeof text, "%smaterial m reflect 1.0\n", light);
-    parse_bad(text, "test.scene:3: reflect 1 outside [0, 1)");
+    snprintf(text, sizeof text, "%smaterial m reflect 1.2\n", light);
+    parse_bad(text, "test.scene:3: reflect 1.2 outside [0, 1]");
     snprintf(text, sizeof text, "%s\n\nquad q nope  0 0 0  1 0 0  1 0 1  0 0 1\n", light);
     parse_bad(text, "test.scene:5: unknown material 'nope'");
     snprintf(text, sizeof text, "%striangle t lamp 0 0 0 1 0 0 0 0 1abc\n", light);
@@ -731,4 +732,299 @@ Test(scene, bad_scenes)
     }
     closedir(d);
     cr_assert_geq(count, 25, "only %d bad scenes", count);
+}
+
+/* ------------------------------------------------- OBJ scenes, cameras */
+
+#define DATA_DIR RP_SOURCE_DIR "/tests/data"
+
+/* The first line of a tests/data file containing needle (from the file
+ * itself, not from the reader). */
+static int data_line(const char *file, const char *needle)
+{
+    char path[1024], buf[1024];
+    snprintf(path, sizeof path, DATA_DIR "/%s", file);
+    FILE *f = fopen(path, "r");
+    cr_assert_not_null(f, "cannot open %s", path);
+    int n = 0, found = 0;
+    while (!found && fgets(buf, sizeof buf, f)) {
+        n++;
+        if (strstr(buf, needle))
+            found = n;
+    }
+    fclose(f);
+    cr_assert_gt(found, 0, "%s has no line with '%s'", file, needle);
+    return found;
+}
+
+/* The number of warnings of s containing needle. */
+static int warnings_with(const rp_scene *s, const char *needle)
+{
+    int n = 0;
+    for (size_t i = 0; i < rp_scene_nwarnings(s); i++)
+        n += strstr(rp_scene_warning(s, i), needle) != NULL;
+    return n;
+}
+
+static const rp_material *surface_material(const rp_scene *s, const char *name)
+{
+    return &rp_scene_materials(s)[surface(s, name)->material];
+}
+
+/* McGuire's CornellBox-Original.obj/.mtl: its eight groups are the eight
+ * surfaces; the light (Kd 0.78, Ke 17 12 4) emits and reflects. */
+Test(scene, obj_mcguire_cornell_box)
+{
+    rp_scene *s = load_ok("tests/data/CornellBox-Original.obj");
+    const char *names[8] = {"floor", "ceiling", "backWall", "rightWall", "leftWall", "shortBox", "tallBox", "light"};
+    cr_assert_eq(rp_scene_nsurfaces(s), 8);
+    for (int i = 0; i < 8; i++)
+        surface(s, names[i]);
+    const rp_material *light = surface_material(s, "light");
+    cr_assert(light->emitter);
+    cr_assert(!rp_material_pure_emitter(light, 3));
+    const double le[3] = {17, 12, 4};
+    for (int b = 0; b < 3; b++) {
+        cr_assert_eq(light->rho[b], 0.78);
+        cr_assert_eq(light->Le[b], le[b]);
+        cr_assert_eq(surface_material(s, "shortBox")->rho[b], 0.0, "Kd 0 0 0 (its Ks is not read)");
+    }
+    cr_assert_float_eq(rp_scene_materials(s)[surface(s, "leftWall")->material].rho[1], 0.065, 1e-17);
+    /* Floor (y = 0) from the file's vertices, in the xz plane. */
+    const double floor_xz[8] = {-1.01, 0.99, 1.00, 0.99, 1.00, -1.04, -0.99, -1.04};
+    assert_rel(surface(s, "floor")->area, shoelace(floor_xz, 4), 1e-14, "floor area");
+    assert_rel(surface(s, "light")->area, 0.47 * 0.38, 1e-13, "light area");
+    /* The light faces down, into the room. */
+    cr_assert_float_eq(first_face(s, "light")->normal.y, -1.0, 1e-15);
+    cr_assert_eq(rp_scene_nwarnings(s), 2);
+    rp_scene_destroy(s);
+}
+
+/* The copy of the same box in chellmuth/pathed repeats two faces exactly
+ * (same vertices, same order), which radpt used to refuse as
+ * "inconsistently oriented": now they are dropped, with one warning naming
+ * the first one's line and the count. */
+Test(scene, obj_duplicate_faces_dropped_not_refused)
+{
+    rp_scene *s = load_ok("tests/data/CornellBox-Original-dup.obj");
+    cr_assert_eq(rp_scene_nsurfaces(s), 7, "no back wall in this copy");
+    char where[128];
+    snprintf(where, sizeof where, "CornellBox-Original-dup.obj:%d: 2 exact duplicate faces dropped",
+             data_line("CornellBox-Original-dup.obj", "f -12 -11 -10 -9"));
+    cr_assert_eq(warnings_with(s, where), 1, "no warning '%s'", where);
+    cr_assert_eq(warnings_with(s, "inconsistently"), 0);
+    /* The short box has five quads left (ten triangles). */
+    cr_assert_eq(surface(s, "leftWall.shortBox")->nfaces, 10);
+    rp_scene_destroy(s);
+}
+
+Test(scene, obj_orientation_conflict_is_a_warning)
+{
+    rp_scene *s = load_ok("tests/data/conflict.obj");
+    char where[96];
+    snprintf(where, sizeof where, "conflict.obj:%d: faces wound inconsistently: 1 edge",
+             data_line("conflict.obj", "f 1 2 5 6"));
+    cr_assert_eq(warnings_with(s, where), 1, "no warning '%s'", where);
+    /* each keeps its own winding: floor (1,0,0) x (1,0,1) = -y, wall +z */
+    cr_assert_float_eq(first_face(s, "floor")->normal.y, -1.0, 1e-15);
+    cr_assert_float_eq(first_face(s, "wall")->normal.z, 1.0, 1e-15);
+    rp_scene_destroy(s);
+}
+
+Test(scene, obj_surface_names_unique)
+{
+    rp_scene *s = load_ok("tests/data/names.obj");
+    cr_assert_eq(rp_scene_nsurfaces(s), 4);
+    cr_assert_str_eq(rp_scene_materials(s)[surface(s, "left wall")->material].name, "white");
+    cr_assert_str_eq(surface_material(s, "a.white")->name, "white");
+    cr_assert_str_eq(surface_material(s, "a.light")->name, "light");
+    /* the group literally called a.white, after a's white part took it */
+    const rp_surface *again = surface(s, "a.white~2");
+    cr_assert_float_eq(rp_scene_faces(s)[again->first_face].normal.z, 1.0, 1e-15);
+    cr_assert_eq(again->line, data_line("names.obj", "f 1 2 6 5"));
+    rp_scene_destroy(s);
+}
+
+/* mesh-mtl.scene places scene.obj (a unit floor quad at y = 0 and a lamp
+ * quad at y = 1, scene.mtl) scaled by 2 and moved up by 3. */
+Test(scene, mesh_mtl_places_the_obj_materials)
+{
+    rp_scene *s = load_ok("tests/data/mesh-mtl.scene");
+    cr_assert_eq(rp_scene_nsurfaces(s), 3);
+    cr_assert_eq(rp_scene_nmaterials(s), 3);
+    const rp_material *own = surface_material(s, "ground"), *white = surface_material(s, "lamp/floor"),
+                      *light = surface_material(s, "lamp/lamp");
+    cr_assert_str_eq(own->name, "white");
+    cr_assert_str_eq(white->name, "lamp/white");
+    cr_assert_str_eq(light->name, "lamp/light");
+    const double kd_white[3] = {0.725, 0.71, 0.68}, kd_light[3] = {0.1, 0.2, 0.3}, le[3] = {17, 12, 4};
+    for (int b = 0; b < 3; b++) {
+        cr_assert_eq(own->rho[b], 0.5);
+        cr_assert_eq(white->rho[b], kd_white[b]);
+        cr_assert_eq(light->rho[b], kd_light[b]);
+        cr_assert_eq(light->Le[b], le[b]);
+    }
+    cr_assert(light->emitter && !white->emitter);
+    /* Unit squares scaled by 2: area 4; the lamp at y = 2 * 1 + 3 = 5,
+     * facing down; the floor at y = 3. */
+    cr_assert_float_eq(surface(s, "lamp/floor")->area, 4.0, 1e-14);
+    cr_assert_float_eq(surface(s, "lamp/lamp")->area, 4.0, 1e-14);
+    rp_vec3 lo, hi;
+    rp_scene_bounds(s, &lo, &hi);
+    cr_assert(lo.y == 0 && hi.y == 5, "y from %g to %g", lo.y, hi.y);
+    cr_assert_float_eq(rp_scene_face_point(s, first_face(s, "lamp/floor") - rp_scene_faces(s), 0.3, 0.3).y, 3.0,
+                       1e-15);
+    cr_assert_float_eq(first_face(s, "lamp/lamp")->normal.y, -1.0, 1e-15);
+    rp_scene_destroy(s);
+}
+
+static rp_scene *parse_in_data(const char *text, rp_error *err)
+{
+    rp_scene *s = NULL;
+    rp_scene_parse(text, "test.scene", DATA_DIR, &s, err);
+    return s;
+}
+
+/* A grey scene takes an MTL colour as its Rec. 709 luminance
+ * Y = 0.2126 R + 0.7152 G + 0.0722 B (ITU-R BT.709); a spectral scene
+ * refuses RGB at the mesh statement's line. */
+Test(scene, mesh_mtl_grey_luminance_spectral_refused)
+{
+    rp_error err = {{0}};
+    rp_scene *s = parse_in_data("bands grey\nmaterial w reflect 0.5\n\nmesh lamp mtl scene.obj\n", &err);
+    cr_assert_not_null(s, "%s", err.message);
+    cr_assert_float_eq(surface_material(s, "lamp/floor")->rho[0], 0.2126 * 0.725 + 0.7152 * 0.71 + 0.0722 * 0.68,
+                       1e-15);
+    cr_assert_float_eq(surface_material(s, "lamp/lamp")->Le[0], 0.2126 * 17 + 0.7152 * 12 + 0.0722 * 4, 1e-13);
+    rp_scene_destroy(s);
+    s = parse_in_data("bands 450 550 650\nmaterial w reflect 0.5\n\nmesh lamp mtl scene.obj\n", &err);
+    cr_assert_null(s);
+    cr_assert(strncmp(err.message, "test.scene:4: ", 14) == 0 && strstr(err.message, "spectral"), "%s",
+              err.message);
+    /* 'mtl' is the keyword, never a material name; a material of the scene
+     * named like a placed one is refused where it would clash */
+    s = parse_in_data("material mtl reflect 0.5\n", &err);
+    cr_assert_null(s);
+    cr_assert(strncmp(err.message, "test.scene:1: ", 14) == 0, "%s", err.message);
+    s = parse_in_data("material lamp/white reflect 0.5\nmesh lamp mtl scene.obj\n", &err);
+    cr_assert_null(s);
+    const char *clash = "test.scene:2: material 'lamp/white'";
+    cr_assert(strncmp(err.message, clash, strlen(clash)) == 0, "%s", err.message);
+}
+
+/* One-material meshes: zero-area faces dropped with a warning (the OFF
+ * file's line), inconsistent orientation refused at the statement's line,
+ * naming the mesh file's line of the conflict. */
+Test(scene, mesh_one_material_drops_and_orientation)
+{
+    rp_error err = {{0}};
+    rp_scene *s = parse_in_data("material w reflect 0.5 emit 1\nmesh t w degenerate-tetra.off\n", &err);
+    cr_assert_not_null(s, "%s", err.message);
+    cr_assert_eq(surface(s, "t")->nfaces, 4);
+    char where[96];
+    snprintf(where, sizeof where, "degenerate-tetra.off:%d: 1 zero-area face dropped",
+             data_line("degenerate-tetra.off", "3 0 1 4"));
+    cr_assert_eq(warnings_with(s, where), 1, "no warning '%s'", where);
+    rp_scene_destroy(s);
+    s = parse_in_data("material w reflect 0.5 emit 1\n\nmesh c w conflict.obj\n", &err);
+    cr_assert_null(s);
+    snprintf(where, sizeof where, "conflict.obj:%d)", data_line("conflict.obj", "f 1 2 5 6"));
+    cr_assert(strncmp(err.message, "test.scene:3: ", 14) == 0 && strstr(err.message, where), "%s", err.message);
+}
+
+/* reflect 1, a perfect reflector (MTL's Kd 1), is accepted as Kd 1 is. */
+Test(scene, reflect_one_accepted)
+{
+    rp_scene *s = parse_ok("material m reflect 1 emit 1\nquad q m  0 0 0  1 0 0  1 0 1  0 0 1\n");
+    cr_assert_eq(rp_scene_materials(s)[0].rho[0], 1.0);
+    rp_scene_destroy(s);
+}
+
+Test(scene, camera_words)
+{
+    rp_camera c;
+    rp_error err = {{0}};
+    cr_assert_eq(rp_camera_parse("fov 30 eye 1 2 3  look 1 2 4 up 0 1 0 size 64 32", "--camera", &c, &err), RP_OK,
+                 "%s", err.message);
+    cr_assert(c.eye.x == 1 && c.eye.y == 2 && c.eye.z == 3 && c.look.z == 4 && c.up.y == 1);
+    cr_assert(c.fov_deg == 30 && c.width == 64 && c.height == 32);
+    /* a scene file's whole statement, keyword and all */
+    rp_camera d;
+    cr_assert_eq(rp_camera_parse("camera eye 1 2 3 look 1 2 4 up 0 1 0 fov 30 size 64 32", NULL, &d, &err), RP_OK);
+    cr_assert_eq(memcmp(&c, &d, sizeof c), 0);
+    const char *bad[][2] = {
+        {"", "--camera: no camera words"},
+        {"eye 1 2 look 0 0 0 up 0 1 0 fov 40 size 8 8", "--camera: camera 'eye' takes 3 numbers"},
+        {"eye 0 0 0 look 0 0 1 up 0 1 0 size 8 8", "--camera: camera lacks 'fov'"},
+        {"eye 0 0 0 look 0 0 0 up 0 1 0 fov 40 size 8 8", "--camera: camera eye and look are the same point"},
+        {"eye 0 0 0 look 0 0 1 up 0 0 2 fov 40 size 8 8", "--camera: camera up is zero or parallel"},
+        {"eye 0 0 0 look 0 0 1 up 0 1 0 fov 180 size 8 8", "--camera: camera fov 180 degrees outside (0, 180)"},
+        {"eye 0 0 0 look 0 0 1 up 0 1 0 fov 40 size 8 0.5", "--camera: camera size 0.5"},
+        {"eye 0 0 nan look 0 0 1 up 0 1 0 fov 40 size 8 8", "--camera: 'nan' is not a finite number"},
+        {"eye 0 0 0 look 0 0 1 up 0 1 0 fov 40 size 8 8 zoom 2", "--camera: unknown camera keyword 'zoom'"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        cr_expect_eq(rp_camera_parse(bad[i][0], "--camera", &d, &err), RP_ERR_INPUT, "'%s' accepted", bad[i][0]);
+        cr_expect(strncmp(err.message, bad[i][1], strlen(bad[i][1])) == 0, "'%s': %s", bad[i][0], err.message);
+    }
+    /* Setting a camera changes the hash (references are cached by it). */
+    rp_scene *s = load_ok("scenes/cornell.scene");
+    char before[17], after[17];
+    rp_scene_hash(s, before);
+    cr_assert_eq(rp_scene_set_camera(s, &c, &err), RP_OK);
+    rp_scene_hash(s, after);
+    cr_assert_str_neq(before, after);
+    cr_assert_eq(memcmp(rp_scene_camera(s), &c, sizeof c), 0);
+    c.fov_deg = 0;
+    cr_assert_eq(rp_scene_set_camera(s, &c, &err), RP_ERR_INPUT);
+    rp_scene_destroy(s);
+}
+
+/* Where a point shows in a camera's image: 1 if inside the frame. */
+static int in_frame(const rp_camera *c, rp_vec3 p)
+{
+    rp_vec3 f = rp_v3_normalize(rp_v3_sub(c->look, c->eye));
+    rp_vec3 r = rp_v3_normalize(rp_v3_cross(f, c->up)), u = rp_v3_cross(r, f);
+    rp_vec3 d = rp_v3_sub(p, c->eye);
+    double z = rp_v3_dot(d, f), t = tan(0.5 * c->fov_deg * PI / 180);
+    return z > 0 && fabs(rp_v3_dot(d, u)) <= t * z &&
+           fabs(rp_v3_dot(d, r)) <= t * z * c->width / (double)c->height;
+}
+
+/* The default camera: McGuire's open box is framed from outside along -z
+ * (every corner of its bounding box in the frame); the furnace cube, a
+ * closed room, is seen from inside (from outside only the backs of its
+ * walls show).  Its printed words give it back exactly. */
+Test(scene, default_camera)
+{
+    rp_error err = {{0}};
+    rp_camera c, back;
+    char words[512];
+    rp_scene *s = load_ok("tests/data/CornellBox-Original.obj");
+    cr_assert_eq(rp_scene_default_camera(s, &c, &err), RP_OK, "%s", err.message);
+    rp_vec3 lo, hi;
+    rp_scene_bounds(s, &lo, &hi);
+    cr_assert_gt(c.eye.z, hi.z);
+    cr_assert(c.look.x == c.eye.x && c.look.y == c.eye.y && c.look.z < c.eye.z, "looks along -z");
+    cr_assert(c.up.x == 0 && c.up.y == 1 && c.up.z == 0);
+    cr_assert(c.fov_deg == RP_DEFAULT_CAMERA_FOV && c.width == 256 && c.height == 256);
+    for (int k = 0; k < 8; k++) {
+        rp_vec3 p = rp_v3(k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z);
+        cr_assert(in_frame(&c, p), "corner %d (%g, %g, %g) out of frame", k, p.x, p.y, p.z);
+    }
+    rp_camera_format(&c, words, sizeof words);
+    cr_assert_eq(rp_camera_parse(words, "words", &back, &err), RP_OK, "%s: %s", words, err.message);
+    cr_assert_eq(memcmp(&c, &back, sizeof c), 0, "%s does not give the camera back", words);
+    rp_scene_destroy(s);
+
+    s = load_ok("tests/data/furnace-cube.obj");
+    cr_assert_eq(rp_scene_default_camera(s, &c, &err), RP_OK, "%s", err.message);
+    cr_assert(c.eye.x > 0 && c.eye.x < 1 && c.eye.y > 0 && c.eye.y < 1 && c.eye.z > 0 && c.eye.z < 1,
+              "eye (%g, %g, %g) outside the closed room", c.eye.x, c.eye.y, c.eye.z);
+    /* the far wall (z = 0) fills the view: its corners at the frame's edge or beyond */
+    cr_assert(in_frame(&c, rp_v3(0.5, 0.5, 0)));
+    rp_camera_format(&c, words, sizeof words);
+    cr_assert_eq(rp_camera_parse(words, "words", &back, &err), RP_OK);
+    cr_assert_eq(memcmp(&c, &back, sizeof c), 0, "%s does not give the camera back", words);
+    rp_scene_destroy(s);
 }

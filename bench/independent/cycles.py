@@ -172,8 +172,8 @@ class Scene:
             i = j
         rho = vals["reflect"] or [0.0] * 3
         le = vals["emit"] or [0.0] * 3
-        if any(not (0 <= r < 1) for r in rho):
-            raise SceneError(f"{where}: reflect outside [0, 1)")
+        if any(not (0 <= r <= 1) for r in rho):
+            raise SceneError(f"{where}: reflect outside [0, 1]")
         if any(e < 0 for e in le):
             raise SceneError(f"{where}: negative emit")
         self.materials[name] = (rho, le)

@@ -1,5 +1,5 @@
-/* The CGAL shim: mesh import (CGAL stream readers, tinyobjloader for OBJ+MTL
- * scenes) and closedness of triangle soups.  See import.h.
+/* The CGAL shim: mesh import (CGAL stream readers; radpt's own line-numbered
+ * reader for OBJ+MTL scenes) and closedness of triangle soups.  See import.h.
  *
  * One translation unit on purpose: every CGAL TU costs tens of seconds and
  * over a gigabyte to compile.  Every extern "C" entry point catches all
@@ -13,9 +13,6 @@
 #include <CGAL/IO/PLY.h>
 #include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
 
-#define TINYOBJLOADER_USE_DOUBLE /* the Debian library is tinyobjloader_double */
-#include <tiny_obj_loader.h>
-
 #include <algorithm>
 #include <array>
 #include <cerrno>
@@ -27,6 +24,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <string>
 #include <unordered_map>
@@ -132,6 +130,7 @@ struct Record {
 struct Records {
     bool ok = false; /* false: binary or unrecognised layout, no line numbers */
     std::vector<Record> vertices, faces;
+    std::vector<Record> other; /* OBJ: every other statement, text = keyword */
 };
 
 std::string strip_comment(const std::string &s)
@@ -162,6 +161,8 @@ Records scan_obj(std::istream &in)
             r.vertices.push_back({n, rest});
         else if (key == "f")
             r.faces.push_back({n, rest});
+        else
+            r.other.push_back({n, key});
     }
     r.ok = true;
     return r;
@@ -180,7 +181,7 @@ Records scan_off(std::istream &in)
         ++n;
         std::string s = strip_comment(line);
         if (!blank(s))
-            data.push_back({n, s});
+            data.push_back({n, std::move(s)});
     }
     if (data.empty())
         return r;
@@ -209,10 +210,12 @@ Records scan_off(std::istream &in)
     long long nv = -1, nf = -1;
     if (!(cs >> nv >> nf) || nv < 0 || nf < 0)
         return r;
+    r.vertices.reserve((std::size_t)std::min<long long>(nv, (long long)data.size()));
+    r.faces.reserve((std::size_t)std::min<long long>(nf, (long long)data.size()));
     for (long long i = 0; i < nv && at < data.size(); ++i, ++at)
-        r.vertices.push_back(data[at]);
+        r.vertices.push_back(std::move(data[at]));
     for (long long i = 0; i < nf && at < data.size(); ++i, ++at)
-        r.faces.push_back(data[at]);
+        r.faces.push_back(std::move(data[at]));
     r.ok = true;
     return r;
 }
@@ -422,24 +425,120 @@ bool fail_located(char *msg, size_t msglen, const std::string &path, Format fmt)
 struct Tri {
     std::size_t v[3];
     std::size_t face; /* input face (polygon) it came from */
+    std::size_t line; /* that face's line in the file (0: unknown) */
+};
+
+/* How many of something, and the line of the first (0: unknown). */
+struct Tally {
+    std::size_t count = 0, line = 0;
+    void add(std::size_t l)
+    {
+        if (count++ == 0)
+            line = l;
+    }
 };
 
 /* Edges traversed twice in the same direction: each such repetition is one
  * orientation conflict between two faces (a consistently oriented 2-manifold
- * uses every directed edge at most once). */
-std::size_t count_orientation_conflicts(const std::vector<Tri> &tris)
+ * uses every directed edge at most once).  Counted on the faces' own
+ * boundaries, not their triangles: a quad's diagonal runs both ways inside
+ * it, so a two-sided sheet of quads would otherwise conflict with itself.
+ * The line is the earliest line of a face that repeats an edge of a face
+ * before it. */
+Tally orientation_conflicts(const std::vector<Polygon> &polys, const std::vector<char> &kept,
+                            const std::vector<std::size_t> &lines)
 {
-    std::vector<std::pair<std::size_t, std::size_t> > edges;
-    edges.reserve(3 * tris.size());
-    for (const Tri &t : tris)
-        for (int k = 0; k < 3; ++k)
-            edges.push_back({t.v[k], t.v[(k + 1) % 3]});
+    struct Edge {
+        std::size_t a, b, face;
+        bool operator<(const Edge &o) const
+        {
+            return a != o.a ? a < o.a : b != o.b ? b < o.b : face < o.face;
+        }
+    };
+    std::vector<Edge> edges;
+    for (std::size_t f = 0; f < polys.size(); ++f) {
+        if (!kept[f])
+            continue;
+        const Polygon &p = polys[f];
+        for (std::size_t k = 0; k < p.size(); ++k)
+            if (p[k] != p[(k + 1) % p.size()])
+                edges.push_back({p[k], p[(k + 1) % p.size()], f});
+    }
     std::sort(edges.begin(), edges.end());
-    std::size_t conflicts = 0;
+    Tally conflicts;
     for (std::size_t i = 1; i < edges.size(); ++i)
-        if (edges[i] == edges[i - 1])
-            ++conflicts;
+        if (edges[i].a == edges[i - 1].a && edges[i].b == edges[i - 1].b) {
+            const std::size_t l = edges[i].face < lines.size() ? lines[edges[i].face] : 0;
+            ++conflicts.count;
+            if (l > 0 && (conflicts.line == 0 || l < conflicts.line))
+                conflicts.line = l;
+        }
     return conflicts;
+}
+
+/* Flags the faces that repeat an earlier face exactly: the same vertex
+ * positions in the same cyclic order, from any starting corner.  Positions,
+ * not indices, so a copy over duplicated vertices is found too; the reverse
+ * order is another face (the back of a two-sided sheet).  Each face is
+ * brought to its lexicographically smallest rotation and hashed (FNV-1a
+ * over the coordinates' bits); faces with equal hashes are compared in
+ * full. */
+std::vector<char> duplicate_faces(const std::vector<Point> &pts, const std::vector<Polygon> &polys)
+{
+    auto coord = [&](const Polygon &p, std::size_t k, int c) {
+        const Point &q = pts[p[k % p.size()]];
+        const double v = c == 0 ? q.x() : c == 1 ? q.y() : q.z();
+        return v == 0 ? 0.0 : v; /* -0 and +0 are one position */
+    };
+    /* <0, 0, >0: corner sequence of p from rotation i against q from j */
+    auto compare = [&](const Polygon &p, std::size_t i, const Polygon &q, std::size_t j) {
+        for (std::size_t k = 0; k < p.size(); ++k)
+            for (int c = 0; c < 3; ++c) {
+                const double a = coord(p, i + k, c), b = coord(q, j + k, c);
+                if (a != b)
+                    return a < b ? -1 : 1;
+            }
+        return 0;
+    };
+    const std::size_t n = polys.size();
+    std::vector<std::size_t> rot(n, 0);
+    std::vector<std::pair<uint64_t, std::size_t> > order(n);
+    for (std::size_t f = 0; f < n; ++f) {
+        const Polygon &p = polys[f];
+        for (std::size_t r = 1; r < p.size(); ++r)
+            if (compare(p, r, p, rot[f]) < 0)
+                rot[f] = r;
+        uint64_t h = UINT64_C(0xcbf29ce484222325) ^ p.size();
+        for (std::size_t k = 0; k < p.size(); ++k)
+            for (int c = 0; c < 3; ++c) {
+                const double v = coord(p, rot[f] + k, c);
+                uint64_t bits;
+                std::memcpy(&bits, &v, sizeof bits);
+                for (int byte = 0; byte < 8; ++byte) {
+                    h ^= (bits >> (8 * byte)) & 0xff;
+                    h *= UINT64_C(0x100000001b3);
+                }
+            }
+        order[f] = {h, f};
+    }
+    std::sort(order.begin(), order.end());
+    std::vector<char> dup(n, 0);
+    for (std::size_t i = 0; i < n;) {
+        std::size_t j = i;
+        while (j < n && order[j].first == order[i].first)
+            ++j;
+        /* a run of equal hashes, in file order: each face against the
+         * earlier ones not already found to be copies */
+        for (std::size_t a = i + 1; a < j; ++a)
+            for (std::size_t b = i; b < a && !dup[order[a].second]; ++b) {
+                const std::size_t fa = order[a].second, fb = order[b].second;
+                if (!dup[fb] && polys[fa].size() == polys[fb].size() &&
+                    compare(polys[fa], rot[fa], polys[fb], rot[fb]) == 0)
+                    dup[fa] = 1;
+            }
+        i = j;
+    }
+    return dup;
 }
 
 /* Newell's normal of a polygon (its area vector times two), well defined for
@@ -461,11 +560,11 @@ K::Vector_3 newell_normal(const std::vector<Point> &pts)
  * polygons, convex or not, and a minimum-area search otherwise.  Each
  * triangle keeps the polygon's winding.  Empty if CGAL finds none. */
 std::vector<Tri> triangulate_polygon(const std::vector<Point> &points, const Polygon &poly,
-                                     std::size_t face)
+                                     std::size_t face, std::size_t line)
 {
     std::vector<Tri> out;
     if (poly.size() == 3) {
-        out.push_back({{poly[0], poly[1], poly[2]}, face});
+        out.push_back({{poly[0], poly[1], poly[2]}, face, line});
         return out;
     }
     std::vector<Point> ring;
@@ -485,7 +584,7 @@ std::vector<Tri> triangulate_polygon(const std::vector<Point> &points, const Pol
         const K::Vector_3 tn = CGAL::cross_product(ring[b] - ring[a], ring[c] - ring[a]);
         if (tn * n < 0)
             std::swap(b, c);
-        out.push_back({{poly[a], poly[b], poly[c]}, face});
+        out.push_back({{poly[a], poly[b], poly[c]}, face, line});
     }
     return out;
 }
@@ -494,6 +593,47 @@ bool degenerate(const std::vector<Point> &pts, const Tri &t)
 {
     /* Exact predicate: zero area exactly, not within a tolerance. */
     return CGAL::collinear(pts[t.v[0]], pts[t.v[1]], pts[t.v[2]]);
+}
+
+/* Every face triangulated, exact duplicates and zero-area faces dropped
+ * and counted (lines[f] is face f's line, 0 if unknown).  A face is
+ * zero-area when none of its triangles has area (or CGAL finds no
+ * triangulation); zero-area slivers of a face with area are left out
+ * without counting, as they carry nothing. */
+struct Triangulation {
+    std::vector<Tri> tris;
+    Tally degenerate, duplicate, orientation;
+    std::size_t first_degenerate_face = SIZE_MAX;
+};
+
+Triangulation triangulate_faces(const std::vector<Point> &points, const std::vector<Polygon> &polys,
+                                const std::vector<std::size_t> &lines)
+{
+    Triangulation out;
+    out.tris.reserve(polys.size());
+    const std::vector<char> dup = duplicate_faces(points, polys);
+    std::vector<char> kept_face(polys.size(), 0);
+    for (std::size_t f = 0; f < polys.size(); ++f) {
+        const std::size_t line = f < lines.size() ? lines[f] : 0;
+        if (dup[f]) {
+            out.duplicate.add(line);
+            continue;
+        }
+        std::size_t kept = 0;
+        for (const Tri &t : triangulate_polygon(points, polys[f], f, line))
+            if (!degenerate(points, t)) {
+                out.tris.push_back(t);
+                ++kept;
+            }
+        kept_face[f] = kept > 0;
+        if (kept == 0) {
+            out.degenerate.add(line);
+            if (out.first_degenerate_face == SIZE_MAX)
+                out.first_degenerate_face = f;
+        }
+    }
+    out.orientation = orientation_conflicts(polys, kept_face, lines);
+    return out;
 }
 
 template <class T> T *alloc_array(std::size_t n)
@@ -522,9 +662,27 @@ void fill_geometry(rp_tri_mesh *m, const std::vector<Point> &pts, const std::vec
     }
     m->ntriangles = tris.size();
     m->tri = alloc_array<uint32_t>(3 * tris.size());
-    for (std::size_t i = 0; i < tris.size(); ++i)
+    m->tri_line = alloc_array<uint32_t>(tris.size());
+    for (std::size_t i = 0; i < tris.size(); ++i) {
         for (int k = 0; k < 3; ++k)
             m->tri[3 * i + k] = (uint32_t)tris[i].v[k];
+        m->tri_line[i] = tris[i].line <= UINT32_MAX ? (uint32_t)tris[i].line : 0;
+    }
+}
+
+/* The reader's drop counts and messages into m. */
+void fill_diagnostics(rp_tri_mesh *m, const Triangulation &t, const std::vector<std::string> &warnings)
+{
+    m->degenerate_faces = t.degenerate.count;
+    m->degenerate_line = t.degenerate.line;
+    m->duplicate_faces = t.duplicate.count;
+    m->duplicate_line = t.duplicate.line;
+    m->orientation_conflicts = t.orientation.count;
+    m->orientation_line = t.orientation.line;
+    m->warnings = alloc_array<char *>(warnings.size());
+    m->nwarnings = warnings.size();
+    for (std::size_t i = 0; i < warnings.size(); ++i)
+        m->warnings[i] = dup_string(warnings[i]);
 }
 
 void free_mesh(rp_tri_mesh *m)
@@ -533,6 +691,7 @@ void free_mesh(rp_tri_mesh *m)
         return;
     std::free(m->xyz);
     std::free(m->tri);
+    std::free(m->tri_line);
     std::free(m->tri_group);
     if (m->group_names)
         for (std::size_t i = 0; i < m->ngroups; ++i)
@@ -545,8 +704,55 @@ void free_mesh(rp_tri_mesh *m)
     std::free(m->material_names);
     std::free(m->material_kd);
     std::free(m->material_ke);
+    if (m->warnings)
+        for (std::size_t i = 0; i < m->nwarnings; ++i)
+            std::free(m->warnings[i]);
+    std::free(m->warnings);
     std::memset(m, 0, sizeof *m);
 }
+
+/* Statements a reader does not use, counted by keyword in the order first
+ * seen: "Ks (8 materials), Ns (8), ...". */
+struct Ignored {
+    std::vector<std::string> order;
+    std::map<std::string, std::size_t> count;
+    std::size_t first_line = 0;
+    void add(const std::string &key, std::size_t line)
+    {
+        std::string k = printable(key);
+        if (count.find(k) == count.end())
+            order.push_back(k);
+        ++count[k];
+        if (first_line == 0 || (line > 0 && line < first_line))
+            first_line = line;
+    }
+    /* unit is singular ("line", "material"); an s is added after counts
+     * other than 1. */
+    std::string list(const char *unit) const
+    {
+        std::string s;
+        for (std::size_t i = 0; i < order.size(); ++i) {
+            const std::size_t n = count.at(order[i]);
+            s += (i ? ", " : "") + order[i] + " (" + std::to_string(n);
+            if (i == 0)
+                s += std::string(" ") + unit + (n == 1 ? "" : "s");
+            s += ")";
+        }
+        return s;
+    }
+
+private:
+    /* A keyword from the file as a message can show it: at most 32
+     * characters, anything unprintable as '?'. */
+    static std::string printable(const std::string &k)
+    {
+        std::string r = k.substr(0, 32);
+        for (char &c : r)
+            if ((unsigned char)c < 0x20 || (unsigned char)c >= 0x7f)
+                c = '?';
+        return r;
+    }
+};
 
 /* ---- rp_cgal_read_mesh ---------------------------------------------------- */
 
@@ -621,85 +827,280 @@ int read_mesh(const std::string &path, int reject_degenerate, rp_tri_mesh *out, 
         }
     }
 
-    std::vector<Tri> tris;
-    tris.reserve(polygons.size());
-    std::size_t ndegenerate = 0;
-    for (std::size_t f = 0; f < polygons.size(); ++f) {
-        std::vector<Tri> t = triangulate_polygon(points, polygons[f], f);
-        std::size_t bad = t.empty() ? polygons[f].size() - 2 : 0;
-        for (const Tri &tri : t) {
-            if (degenerate(points, tri))
-                ++bad;
-            else
-                tris.push_back(tri);
-        }
-        if (bad > 0 && reject_degenerate)
-            return fail(msg, msglen, path, face_line(path, fmt, f),
-                        "face " + std::to_string(f) + " is degenerate (zero area)");
-        ndegenerate += bad;
+    /* Lines of the faces, when the file is ASCII and scans as CGAL read it. */
+    const Records rec = scan_records(path, fmt);
+    const bool lined = rec.ok && rec.faces.size() == polygons.size();
+    std::vector<std::size_t> lines(polygons.size(), 0);
+    for (std::size_t f = 0; lined && f < polygons.size(); ++f)
+        lines[f] = rec.faces[f].line;
+
+    const Triangulation t = triangulate_faces(points, polygons, lines);
+    if (t.degenerate.count > 0 && reject_degenerate)
+        return fail(msg, msglen, path, t.degenerate.line,
+                    "face " + std::to_string(t.first_degenerate_face) + " is degenerate (zero area)");
+    if (t.tris.empty())
+        return fail(msg, msglen, path, 0, "every face is degenerate (zero area) or a duplicate");
+
+    /* An OBJ's other statements are not read by a one-material mesh. */
+    std::vector<std::string> warnings;
+    if (fmt == FMT_OBJ && rec.ok) {
+        Ignored ignored;
+        for (const Record &r : rec.other)
+            ignored.add(r.text, r.line);
+        if (ignored.first_line > 0)
+            warnings.push_back(path + ":" + std::to_string(ignored.first_line) +
+                               ": a mesh is geometry with one material; ignored: " +
+                               ignored.list("line"));
     }
-    if (tris.empty())
-        return fail(msg, msglen, path, 0, "every face is degenerate (zero area)");
 
     rp_tri_mesh m;
     std::memset(&m, 0, sizeof m);
     try {
-        fill_geometry(&m, points, tris);
+        fill_geometry(&m, points, t.tris);
+        fill_diagnostics(&m, t, warnings);
     } catch (...) {
         free_mesh(&m);
         throw;
     }
-    m.degenerate_faces = ndegenerate;
-    m.orientation_conflicts = count_orientation_conflicts(tris);
     *out = m;
     return 0;
 }
 
-/* ---- rp_obj_read_scene ---------------------------------------------------- */
+/* ---- rp_obj_read_scene: radpt's own OBJ + MTL reader ----------------------
+ *
+ * Wavefront's "Object Files (.obj)" and "Material Library Files (.mtl)"
+ * (Advanced Visualizer manual, appendices B1 and B2), read for what a
+ * diffuse scene uses: v, f, o, g, usemtl, mtllib; newmtl, Kd, Ke.  Every
+ * other statement is counted and listed in one warning per file.  '#'
+ * starts a comment anywhere on a line; a line ending in a backslash
+ * continues on the next (the statement keeps its first line's number).
+ * Numbers are whole tokens read by strtod; NaN and infinities are refused.
+ * Names (o, g, newmtl, usemtl) are the rest of the line, words joined by
+ * one space. */
 
-/* tinyobjloader only warns when an mtllib file is missing and carries on with
- * default materials; a scene must not silently lose its materials, so the
- * file reader is wrapped to remember which libraries failed. */
-class Checked_material_reader : public tinyobj::MaterialReader {
-public:
-    explicit Checked_material_reader(const std::string &basedir) : inner_(basedir) {}
-    bool operator()(const std::string &mat_id, std::vector<tinyobj::material_t> *materials,
-                    std::map<std::string, int> *mat_map, std::string *warn,
-                    std::string *err) override
-    {
-        bool ok = inner_(mat_id, materials, mat_map, warn, err);
-        if (!ok)
-            missing.push_back(mat_id);
-        return ok;
-    }
-    std::vector<std::string> missing;
-
-private:
-    tinyobj::MaterialFileReader inner_;
+struct Statement {
+    std::size_t line;
+    std::vector<std::string> tok;
 };
 
-std::string first_line(const std::string &s)
+/* The file's statements; false with errno's text in *why if it cannot be
+ * read. */
+bool read_statements(const std::string &path, std::vector<Statement> *out, std::string *why)
 {
-    std::istringstream in(s);
-    std::string line;
-    while (std::getline(in, line))
-        if (!blank(line))
-            return line;
-    return "";
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        *why = std::strerror(errno);
+        return false;
+    }
+    std::string raw, joined;
+    std::size_t n = 0, first = 0;
+    auto flush = [&]() {
+        std::istringstream ss(strip_comment(joined));
+        Statement st;
+        st.line = first;
+        std::string t;
+        while (ss >> t)
+            st.tok.push_back(t);
+        if (!st.tok.empty())
+            out->push_back(std::move(st));
+        joined.clear();
+    };
+    while (std::getline(in, raw)) {
+        ++n;
+        if (!raw.empty() && raw.back() == '\r')
+            raw.pop_back();
+        if (joined.empty())
+            first = n;
+        const bool more = !raw.empty() && raw.back() == '\\';
+        if (more)
+            raw.back() = ' ';
+        joined += raw;
+        if (!more)
+            flush();
+        else
+            joined += ' ';
+    }
+    if (!joined.empty())
+        flush();
+    if (in.bad()) {
+        *why = "read error";
+        return false;
+    }
+    return true;
 }
 
-/* tinyobjloader reports " (line N.)" inside some warnings: split it out. */
-std::size_t line_in_warning(std::string *w)
+/* Words tok[from..] joined by one space. */
+std::string rest_of(const Statement &st, std::size_t from)
 {
-    std::size_t p = w->find("(line ");
-    if (p == std::string::npos)
-        return 0;
-    std::size_t n = (std::size_t)std::strtoull(w->c_str() + p + 6, nullptr, 10);
-    std::size_t b = p;
-    while (b > 0 && (*w)[b - 1] == ' ')
-        --b;
-    w->erase(b);
-    return n;
+    std::string s;
+    for (std::size_t i = from; i < st.tok.size(); ++i)
+        s += (i > from ? " " : "") + st.tok[i];
+    return s;
+}
+
+/* An error at path:line; what names the problem. */
+struct Read_error {
+    std::string path;
+    std::size_t line;
+    std::string what;
+};
+
+struct Mtl_material {
+    std::string name, file;
+    std::size_t line = 0;    /* its newmtl */
+    double kd[3] = {0, 0, 0}, ke[3] = {0, 0, 0};
+    bool has_kd = false, has_ke = false;
+    std::size_t ks_line = 0; /* a non-zero Ks, 0 if none */
+};
+
+struct Mtl_library {
+    std::vector<Mtl_material> mats;
+    std::map<std::string, std::size_t> index;
+};
+
+/* Kd, Ke: one value (grey: MTL says "if only r is specified, g and b are
+ * assumed equal to r") or three, each finite and in [lo, hi]. */
+void mtl_color(const std::string &path, const Statement &st, double lo, double hi, double out[3])
+{
+    const std::string &key = st.tok[0];
+    const std::size_t n = st.tok.size() - 1;
+    if (n >= 1 && (st.tok[1] == "spectral" || st.tok[1] == "xyz"))
+        throw Read_error{path, st.line,
+                         "'" + key + " " + st.tok[1] + "' is not supported (radpt reads RGB " + key + " only)"};
+    if (n != 1 && n != 3)
+        throw Read_error{path, st.line,
+                         key + " takes 1 value (grey) or 3 (r g b), not " + std::to_string(n)};
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::string &t = st.tok[1 + i];
+        double v;
+        if (!parse_double(t, &v) || t.find_first_of("xX") != std::string::npos)
+            throw Read_error{path, st.line, key + ": '" + t.substr(0, 64) + "' is not a number"};
+        if (!std::isfinite(v))
+            throw Read_error{path, st.line, key + ": '" + t.substr(0, 64) + "' is not finite"};
+        if (v < lo || v > hi) {
+            char b[160];
+            if (hi < HUGE_VAL)
+                std::snprintf(b, sizeof b, "%s %g outside [%g, %g]", key.c_str(), v, lo, hi);
+            else
+                std::snprintf(b, sizeof b, "%s %g is negative", key.c_str(), v);
+            throw Read_error{path, st.line, b};
+        }
+        out[i] = v;
+    }
+    if (n == 1)
+        out[1] = out[2] = out[0];
+}
+
+/* Reads one MTL file into lib; warnings (one list of ignored statements,
+ * materials that come out black) go to warnings. */
+void read_mtl(const std::string &path, std::size_t obj_line, const std::string &obj_path, Mtl_library *lib,
+              std::vector<std::string> *warnings)
+{
+    std::vector<Statement> sts;
+    std::string why;
+    if (!read_statements(path, &sts, &why))
+        throw Read_error{obj_path, obj_line, "material library '" + path + "' not found (" + why + ")"};
+    Ignored ignored;
+    std::set<std::string> seen; /* keywords of the current material */
+    Mtl_material *cur = nullptr;
+    const std::size_t first = lib->mats.size();
+    for (const Statement &st : sts) {
+        const std::string &key = st.tok[0];
+        if (key == "newmtl") {
+            const std::string name = rest_of(st, 1);
+            if (name.empty())
+                throw Read_error{path, st.line, "newmtl needs a name"};
+            auto it = lib->index.find(name);
+            if (it != lib->index.end()) {
+                const Mtl_material &m = lib->mats[it->second];
+                throw Read_error{path, st.line,
+                                 "material '" + name + "' defined twice (first at " + m.file + ":" +
+                                     std::to_string(m.line) + ")"};
+            }
+            lib->index[name] = lib->mats.size();
+            lib->mats.push_back(Mtl_material());
+            cur = &lib->mats.back();
+            cur->name = name;
+            cur->file = path;
+            cur->line = st.line;
+            seen.clear();
+            continue;
+        }
+        const bool kd = key == "Kd", ke = key == "Ke";
+        if ((kd || ke) && !cur)
+            throw Read_error{path, st.line, "'" + key + "' before any newmtl"};
+        if (kd || ke) {
+            bool &has = kd ? cur->has_kd : cur->has_ke;
+            if (has)
+                throw Read_error{path, st.line, key + " given twice for material '" + cur->name + "'"};
+            has = true;
+            mtl_color(path, st, 0, kd ? 1 : HUGE_VAL, kd ? cur->kd : cur->ke);
+            continue;
+        }
+        /* Not read: listed once per material using it. */
+        if (!cur || seen.insert(key).second)
+            ignored.add(key, st.line);
+        if (key == "Ks" && cur) {
+            /* Read leniently, only to say when a material is black here. */
+            for (std::size_t i = 1; i < st.tok.size(); ++i) {
+                double v;
+                if (parse_double(st.tok[i], &v) && v > 0 && cur->ks_line == 0)
+                    cur->ks_line = st.line;
+            }
+        }
+    }
+    if (ignored.first_line > 0)
+        warnings->push_back(path + ":" + std::to_string(ignored.first_line) +
+                            ": radpt models diffuse surfaces; ignored: " + ignored.list("material"));
+    std::string shiny, dark;
+    std::size_t shiny_line = 0, dark_line = 0, nshiny = 0, ndark = 0;
+    for (std::size_t i = first; i < lib->mats.size(); ++i) {
+        const Mtl_material &m = lib->mats[i];
+        const bool black = m.kd[0] == 0 && m.kd[1] == 0 && m.kd[2] == 0;
+        const bool emits = m.ke[0] > 0 || m.ke[1] > 0 || m.ke[2] > 0;
+        if (black && m.ks_line > 0) {
+            shiny += (nshiny++ ? ", " : "") + m.name;
+            if (shiny_line == 0)
+                shiny_line = m.ks_line;
+        } else if (!m.has_kd && !emits) {
+            dark += (ndark++ ? ", " : "") + m.name;
+            if (dark_line == 0)
+                dark_line = m.line;
+        }
+    }
+    if (nshiny > 0)
+        warnings->push_back(path + ":" + std::to_string(shiny_line) + ": " +
+                            (nshiny > 1 ? "materials " : "material ") + shiny +
+                            (nshiny > 1 ? " have" : " has") +
+                            " Kd 0 but a non-zero Ks: radpt models diffuse reflection only, so " +
+                            (nshiny > 1 ? "they are" : "it is") + " black here");
+    if (ndark > 0)
+        warnings->push_back(path + ":" + std::to_string(dark_line) + ": " +
+                            (ndark > 1 ? "materials " : "material ") + dark +
+                            (ndark > 1 ? " have" : " has") +
+                            " no Kd and no Ke: black (Kd 0), as radpt invents no reflectance");
+}
+
+/* A face corner "v", "v/vt", "v/vt/vn" or "v//vn": the vertex index,
+ * 0-based, from OBJ's 1-based or negative (relative to the vertices read
+ * so far) index.  Range against the final count is checked later. */
+long long obj_corner(const std::string &path, const Statement &st, const std::string &tok, std::size_t nv)
+{
+    const std::string v = tok.substr(0, tok.find('/'));
+    long long k;
+    if (!parse_long(v, &k))
+        throw Read_error{path, st.line, "'" + tok.substr(0, 64) + "' is not a vertex index"};
+    if (k == 0)
+        throw Read_error{path, st.line, "vertex index 0 (OBJ counts vertices from 1)"};
+    if (k < 0) {
+        const long long idx = (long long)nv + k;
+        if (idx < 0)
+            throw Read_error{path, st.line,
+                             "relative vertex index " + v + " reaches before the first vertex (" +
+                                 std::to_string(nv) + " read so far)"};
+        return idx;
+    }
+    return k - 1;
 }
 
 int read_scene(const std::string &path, rp_tri_mesh *out, char *msg, size_t msglen)
@@ -707,172 +1108,169 @@ int read_scene(const std::string &path, rp_tri_mesh *out, char *msg, size_t msgl
     std::string ext;
     if (format_of(path, &ext) != FMT_OBJ)
         return fail(msg, msglen, path, 0, "a scene mesh must be .obj, not '" + ext + "'");
-    std::ifstream in(path);
-    if (!in)
-        return fail(msg, msglen, path, 0, std::string("cannot open: ") + std::strerror(errno));
+    std::vector<Statement> sts;
+    std::string why;
+    if (!read_statements(path, &sts, &why))
+        return fail(msg, msglen, path, 0, "cannot open: " + why);
+    const std::size_t slash = path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "" : path.substr(0, slash + 1);
 
-    /* tinyobjloader reads "nan" as 0 without a word, and reports bad face
-     * indices without their line: check both first. */
-    {
-        Records r = scan_records(path, FMT_OBJ);
-        std::size_t line = 0;
-        std::string what;
-        if (check_vertex_records(r, &line, &what) ||
-            check_face_records(r, FMT_OBJ, &line, &what))
-            return fail(msg, msglen, path, line, what);
-        /* tinyobjloader stores a face's corner count in an unsigned char. */
-        for (const Record &f : r.faces) {
-            std::istringstream ss(f.text);
-            std::string tok;
-            std::size_t n = 0;
-            while (ss >> tok)
-                ++n;
-            if (n > 255)
-                return fail(msg, msglen, path, f.line,
-                            "face with " + std::to_string(n) +
-                                " vertices (at most 255 in an OBJ scene)");
-        }
-    }
-
-    std::size_t slash = path.find_last_of('/');
-    std::string basedir = slash == std::string::npos ? "" : path.substr(0, slash + 1);
-    Checked_material_reader reader(basedir);
-    tinyobj::attrib_t attrib;
-    std::vector<tinyobj::shape_t> shapes;
-    std::vector<tinyobj::material_t> materials;
-    std::string warn, err;
-    /* Polygons are triangulated below by CGAL, as in rp_cgal_read_mesh, so
-     * both readers split a polygon the same way. */
-    bool ok = tinyobj::LoadObj(&attrib, &shapes, &materials, &warn, &err, &in, &reader,
-                               false /* triangulate */, false);
-    if (!ok || !err.empty()) {
-        std::string e = first_line(err);
-        return fail(msg, msglen, path, 0, e.empty() ? "not a valid OBJ file" : e);
-    }
-    if (!reader.missing.empty())
-        return fail(msg, msglen, path, 0,
-                    "material library '" + reader.missing[0] + "' not found");
-    /* Warnings that would change the scene are errors; the rest are passed
-     * on in msg with a successful return. */
-    {
-        std::istringstream ws(warn);
-        std::string w;
-        while (std::getline(ws, w)) {
-            if (w.find("not found") != std::string::npos ||
-                w.find("out of bounds") != std::string::npos) {
-                std::size_t line = line_in_warning(&w);
-                return fail(msg, msglen, path, line, w);
-            }
-        }
-    }
-
-    const std::size_t nv = attrib.vertices.size() / 3;
-    if (nv == 0)
-        return fail(msg, msglen, path, 0, "no vertices");
-    if (nv > UINT32_MAX)
-        return fail(msg, msglen, path, 0, "too many vertices for 32-bit indices");
+    std::vector<std::string> warnings;
+    Mtl_library lib;
     std::vector<Point> points;
-    points.reserve(nv);
-    for (std::size_t i = 0; i < nv; ++i)
-        points.emplace_back(attrib.vertices[3 * i], attrib.vertices[3 * i + 1],
-                            attrib.vertices[3 * i + 2]);
-    for (std::size_t i = 0; i < nv; ++i)
-        if (!std::isfinite(points[i].x()) || !std::isfinite(points[i].y()) ||
-            !std::isfinite(points[i].z()))
-            return fail(msg, msglen, path, 0,
-                        "vertex " + std::to_string(i) + " has a non-finite coordinate");
-
-    /* Groups by name: a name used by several o/g statements is one group. */
+    std::vector<Polygon> polys;
+    std::vector<std::size_t> lines;
+    std::vector<uint32_t> face_group, face_material;
     std::vector<std::string> group_names;
-    std::map<std::string, std::size_t> group_of;
-    std::vector<Tri> tris;
-    std::vector<uint32_t> tri_group, tri_material;
-    std::size_t ndegenerate = 0, face = 0;
-    for (const tinyobj::shape_t &s : shapes) {
-        const tinyobj::mesh_t &mesh = s.mesh;
-        if (mesh.num_face_vertices.empty())
-            continue;
-        auto g = group_of.find(s.name);
-        std::size_t gi;
-        if (g == group_of.end()) {
-            gi = group_names.size();
-            group_of[s.name] = gi;
-            group_names.push_back(s.name);
-        } else {
-            gi = g->second;
-        }
-        std::size_t at = 0;
-        for (std::size_t f = 0; f < mesh.num_face_vertices.size(); ++f, ++face) {
-            const std::size_t nc = mesh.num_face_vertices[f];
-            if (nc < 3 || at + nc > mesh.indices.size())
-                return fail(msg, msglen, path, 0,
-                            "face " + std::to_string(face) + " has fewer than 3 vertices");
-            Polygon poly(nc);
-            for (std::size_t k = 0; k < nc; ++k) {
-                int vi = mesh.indices[at + k].vertex_index;
-                if (vi < 0 || (std::size_t)vi >= nv)
-                    return fail(msg, msglen, path, 0,
-                                "face " + std::to_string(face) + ": vertex index out of range");
-                poly[k] = (std::size_t)vi;
-            }
-            at += nc;
-            const int mat = f < mesh.material_ids.size() ? mesh.material_ids[f] : -1;
-            const uint32_t mi = mat >= 0 && (std::size_t)mat < materials.size()
-                                    ? (uint32_t)mat
-                                    : UINT32_MAX;
-            std::vector<Tri> t = triangulate_polygon(points, poly, face);
-            if (t.empty())
-                ndegenerate += nc - 2;
-            for (const Tri &tri : t) {
-                if (degenerate(points, tri)) {
-                    ++ndegenerate;
+    std::map<std::string, uint32_t> group_of;
+    try {
+        /* Libraries first, so a usemtl before its mtllib still resolves. */
+        std::set<std::string> loaded;
+        for (const Statement &st : sts) {
+            if (st.tok[0] != "mtllib")
+                continue;
+            if (st.tok.size() < 2)
+                throw Read_error{path, st.line, "mtllib needs a file name"};
+            for (std::size_t i = 1; i < st.tok.size(); ++i) {
+                const std::string file = st.tok[i][0] == '/' ? st.tok[i] : dir + st.tok[i];
+                if (!loaded.insert(file).second)
                     continue;
+                try {
+                    read_mtl(file, st.line, path, &lib, &warnings);
+                } catch (Read_error &e) {
+                    /* say which OBJ asked for the library */
+                    if (e.path != path)
+                        e.what += " (material library of " + path + ":" + std::to_string(st.line) + ")";
+                    throw;
                 }
-                tris.push_back(tri);
-                tri_group.push_back((uint32_t)gi);
-                tri_material.push_back(mi);
             }
         }
+
+        Ignored ignored;
+        std::string group;
+        uint32_t material = UINT32_MAX;
+        std::vector<long long> corners;
+        for (const Statement &st : sts) {
+            const std::string &key = st.tok[0];
+            if (key == "v") {
+                const std::size_t n = st.tok.size() - 1;
+                if (n != 3 && n != 4 && n != 6)
+                    throw Read_error{path, st.line,
+                                     "vertex " + std::to_string(points.size() + 1) + " has " +
+                                         std::to_string(n) + " numbers (x y z, x y z w or x y z r g b)"};
+                double c[3];
+                for (std::size_t i = 0; i < n; ++i) {
+                    const std::string &t = st.tok[1 + i];
+                    double v;
+                    if (!parse_double(t, &v))
+                        throw Read_error{path, st.line,
+                                         "vertex " + std::to_string(points.size() + 1) + ": '" +
+                                             t.substr(0, 64) + "' is not a number"};
+                    if (i < 3 && !std::isfinite(v))
+                        throw Read_error{path, st.line,
+                                         "vertex " + std::to_string(points.size() + 1) + ": coordinate '" +
+                                             t.substr(0, 64) + "' is not finite"};
+                    if (i < 3)
+                        c[i] = v;
+                }
+                if (n == 6)
+                    ignored.add("vertex colours", st.line);
+                points.emplace_back(c[0], c[1], c[2]);
+            } else if (key == "f") {
+                if (st.tok.size() < 4)
+                    throw Read_error{path, st.line,
+                                     "face " + std::to_string(polys.size()) + " has fewer than 3 vertices"};
+                corners.clear();
+                for (std::size_t i = 1; i < st.tok.size(); ++i)
+                    corners.push_back(obj_corner(path, st, st.tok[i], points.size()));
+                Polygon poly;
+                for (long long k : corners)
+                    poly.push_back((std::size_t)k);
+                auto g = group_of.find(group);
+                if (g == group_of.end()) {
+                    g = group_of.emplace(group, (uint32_t)group_names.size()).first;
+                    group_names.push_back(group);
+                }
+                polys.push_back(std::move(poly));
+                lines.push_back(st.line);
+                face_group.push_back(g->second);
+                face_material.push_back(material);
+            } else if (key == "o" || key == "g") {
+                /* One current group; a later o or g replaces it.  Several
+                 * names on a g line (membership in several groups) are kept
+                 * together as one name, as most readers do. */
+                group = rest_of(st, 1);
+            } else if (key == "usemtl") {
+                const std::string name = rest_of(st, 1);
+                if (name.empty())
+                    throw Read_error{path, st.line, "usemtl needs a material name"};
+                auto it = lib.index.find(name);
+                if (it == lib.index.end())
+                    throw Read_error{path, st.line,
+                                     "usemtl '" + name + "': no such material" +
+                                         (loaded.empty() ? " (the file names no mtllib)"
+                                                         : " in its material libraries")};
+                material = (uint32_t)it->second;
+            } else if (key != "mtllib") {
+                ignored.add(key, st.line);
+            }
+        }
+        if (ignored.first_line > 0)
+            warnings.insert(warnings.begin(), path + ":" + std::to_string(ignored.first_line) +
+                                                  ": radpt models diffuse polygons; ignored: " +
+                                                  ignored.list("line"));
+        if (points.empty())
+            return fail(msg, msglen, path, 0, "no vertices");
+        if (polys.empty())
+            return fail(msg, msglen, path, 0, "no faces");
+        if (points.size() > UINT32_MAX)
+            return fail(msg, msglen, path, 0, "too many vertices for 32-bit indices");
+        for (std::size_t f = 0; f < polys.size(); ++f)
+            for (std::size_t v : polys[f])
+                if (v >= points.size())
+                    throw Read_error{path, lines[f],
+                                     "face " + std::to_string(f) + ": vertex index " + std::to_string(v + 1) +
+                                         " out of range (" + std::to_string(points.size()) + " vertices)"};
+    } catch (const Read_error &e) {
+        return fail(msg, msglen, e.path, e.line, e.what);
     }
-    if (face == 0)
-        return fail(msg, msglen, path, 0, "no faces");
-    if (tris.empty())
-        return fail(msg, msglen, path, 0, "every face is degenerate (zero area)");
+
+    const Triangulation t = triangulate_faces(points, polys, lines);
+    if (t.tris.empty())
+        return fail(msg, msglen, path, 0, "every face is degenerate (zero area) or a duplicate");
 
     rp_tri_mesh m;
     std::memset(&m, 0, sizeof m);
     try {
-        fill_geometry(&m, points, tris);
-        m.tri_group = alloc_array<uint32_t>(tris.size());
-        m.tri_material = alloc_array<uint32_t>(tris.size());
-        std::copy(tri_group.begin(), tri_group.end(), m.tri_group);
-        std::copy(tri_material.begin(), tri_material.end(), m.tri_material);
+        fill_geometry(&m, points, t.tris);
+        fill_diagnostics(&m, t, warnings);
+        m.tri_group = alloc_array<uint32_t>(t.tris.size());
+        m.tri_material = alloc_array<uint32_t>(t.tris.size());
+        for (std::size_t i = 0; i < t.tris.size(); ++i) {
+            m.tri_group[i] = face_group[t.tris[i].face];
+            m.tri_material[i] = face_material[t.tris[i].face];
+        }
         m.group_names = alloc_array<char *>(group_names.size());
         m.ngroups = group_names.size();
         for (std::size_t i = 0; i < group_names.size(); ++i)
             m.group_names[i] = dup_string(group_names[i]);
-        m.nmaterials = materials.size();
-        m.material_names = alloc_array<char *>(materials.size());
-        m.material_kd = alloc_array<double>(3 * materials.size());
-        m.material_ke = alloc_array<double>(3 * materials.size());
-        for (std::size_t i = 0; i < materials.size(); ++i) {
-            m.material_names[i] = dup_string(materials[i].name);
+        const std::size_t nm = lib.mats.size();
+        m.nmaterials = nm;
+        m.material_names = alloc_array<char *>(nm);
+        m.material_kd = alloc_array<double>(3 * nm);
+        m.material_ke = alloc_array<double>(3 * nm);
+        for (std::size_t i = 0; i < nm; ++i) {
+            m.material_names[i] = dup_string(lib.mats[i].name);
             for (int c = 0; c < 3; ++c) {
-                m.material_kd[3 * i + c] = materials[i].diffuse[c];
-                m.material_ke[3 * i + c] = materials[i].emission[c];
+                m.material_kd[3 * i + c] = lib.mats[i].kd[c];
+                m.material_ke[3 * i + c] = lib.mats[i].ke[c];
             }
         }
     } catch (...) {
         free_mesh(&m);
         throw;
     }
-    m.degenerate_faces = ndegenerate;
-    m.orientation_conflicts = count_orientation_conflicts(tris);
     *out = m;
-
-    std::string w = first_line(warn);
-    if (!w.empty())
-        set_msg(msg, msglen, "%s: %s", path.c_str(), w.c_str());
     return 0;
 }
 
