@@ -371,7 +371,7 @@ static rp_status run_scene(const rp_experiment_params *p, const real_scene *rs, 
     if (st != RP_OK)
         return st;
     rp_scene *scene = NULL;
-    if ((st = rp_scene_load(path, &scene, err)) != RP_OK)
+    if ((st = rp_cli_load_scene(path, NULL, 1, &scene, err)) != RP_OK)
         return st;
     rp_exp_log(p, "realscenes: %s (%zu faces)", rs->id, rp_scene_nfaces(scene));
     const double budget = p->budget > 0 ? p->budget : (p->quick ? 5.0 : 60.0);
