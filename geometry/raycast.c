@@ -125,6 +125,7 @@ struct rp_raycast {
      * quad has tri_second[i] = 1 (its (u,v) are mirrored). */
     unsigned char *tri_second;
     rp_vec3 centre;
+    double cmag;        /* |c|_inf */
     double offset_rel;  /* --ray-offset: delta(p) = offset_rel |p - c|_inf */
     /* Per face: the plane offset n . v0 (world coordinates), the distance
      * within which a point counts as on the plane (its non-planarity and
@@ -189,7 +190,14 @@ void rp_raycast_destroy(rp_raycast *rc)
     free(rc);
 }
 
-static double rp_inf_norm(rp_vec3 v) { return fmax(fabs(v.x), fmax(fabs(v.y), fabs(v.z))); }
+/* max(|x|, |y|, |z|); with plain comparisons, which compile to max
+ * instructions, where fmax (NaN rules) is a call into libm. */
+static inline double rp_inf_norm(rp_vec3 v)
+{
+    double x = fabs(v.x), y = fabs(v.y), z = fabs(v.z);
+    double m = x > y ? x : y;
+    return m > z ? m : z;
+}
 
 /* 1 if point p lies on the plane of face f (rule 2 of the header). */
 static int rp_on_plane(const rp_raycast *rc, uint32_t f, rp_vec3 p)
@@ -379,6 +387,7 @@ static rp_status rp_planes(rp_raycast *rc, rp_error *err)
     rc->centre = rp_v3_scale(rp_v3_add(lo, hi), 0.5);
     if (!rp_v3_isfinite(rc->centre))
         rc->centre = rp_v3(0, 0, 0);
+    rc->cmag = rp_inf_norm(rc->centre);
 
     rc->plane_d = malloc((nfaces ? nfaces : 1) * sizeof *rc->plane_d);
     rc->plane_tol = malloc((nfaces ? nfaces : 1) * sizeof *rc->plane_tol);
@@ -449,9 +458,14 @@ rp_status rp_raycast_create(const rp_scene *scene, const rp_mesh *mesh, rp_rayca
     return RP_OK;
 }
 
-double rp_raycast_offset(const rp_raycast *rc, rp_vec3 p)
+static inline double rp_offset_at(const rp_raycast *rc, rp_vec3 p)
 {
     return rc->offset_rel * rp_inf_norm(rp_v3_sub(p, rc->centre));
+}
+
+double rp_raycast_offset(const rp_raycast *rc, rp_vec3 p)
+{
+    return rp_offset_at(rc, p);
 }
 
 void rp_raycast_set_offset(rp_raycast *rc, double rel)
@@ -488,12 +502,13 @@ static void rp_rayhit_init(const rp_raycast *rc, struct RTCRayHit *rh, rp_vec3 o
 }
 
 /* Fills hit from Embree's answer to a ray that started at o_emb (the offset
- * origin actually traced) along unit d; distances are reported from o, the
- * caller's point, which lies on the same line up to the offset along n.
- * With from_surface, a hit on a face whose plane holds o is rejected (rule
- * 2 of the header): returns -1 then, 0 on a miss, 1 on a hit. */
-static int rp_hit_fill(const rp_raycast *rc, const struct RTCRayHit *rh, rp_vec3 o, rp_vec3 o_emb,
-                       rp_vec3 d, int from_surface, rp_hit *hit)
+ * origin actually traced, delta from o) along unit d; distances are
+ * reported from o, the caller's point, which lies on the same line up to
+ * the offset along n.  mag is |o - c|_inf.  With from_surface, a hit on a
+ * face whose plane holds o is rejected (rule 2 of the header; |o|_inf is
+ * bounded by mag + |c|_inf): returns -1 then, 0 on a miss, 1 on a hit. */
+static inline int rp_hit_fill(const rp_raycast *rc, const struct RTCRayHit *rh, rp_vec3 o, rp_vec3 o_emb, double mag,
+                              double delta, rp_vec3 d, int from_surface, rp_hit *hit)
 {
     if (rh->hit.geomID == RTC_INVALID_GEOMETRY_ID)
         return 0;
@@ -503,30 +518,27 @@ static int rp_hit_fill(const rp_raycast *rc, const struct RTCRayHit *rh, rp_vec3
 
     /* o's signed distance from the face's plane, in double. */
     double h = rp_v3_dot(rp_v3_sub(rc->vertices[fc->v[0]], o), fc->normal);
-    if (from_surface &&
-        fabs(h) <= rc->plane_tol[face] + RP_RAYCAST_PLANE_ULPS * DBL_EPSILON * rp_inf_norm(o))
+    if (from_surface && fabs(h) <= rc->plane_tol[face] + RP_RAYCAST_PLANE_ULPS * DBL_EPSILON * (mag + rc->cmag))
         return -1;
 
-    /* Embree's hit, in double, measured from o. */
-    rp_vec3 p_emb = rp_v3_madd(o_emb, d, (double)rh->ray.tfar);
-    double t = rp_v3_dot(rp_v3_sub(p_emb, o), d);
-    rp_vec3 p = p_emb;
-
+    /* Embree's hit distance, measured from o. */
+    double t = (double)rh->ray.tfar + rp_v3_dot(rp_v3_sub(o_emb, o), d);
     double cosd = rp_v3_dot(d, fc->normal);
+    int refined = 0;
     if (fabs(cosd) > RP_RAYCAST_REFINE_COS) {
         /* Intersect o + t d with the face's plane in double.  Embree's
          * distance differs from it by the float rounding of the origin and
          * the face (their float magnitudes) over |cos|, and by the offset
          * between o and o_emb. */
-        double tr = h / cosd;
-        double slack = RP_RAYCAST_REFINE_ULPS * FLT_EPSILON *
-                           (rp_inf_norm(rp_v3_sub(o_emb, rc->centre)) + rc->fmag[face]) / fabs(cosd) +
-                       4 * rp_v3_length(rp_v3_sub(o_emb, o)) / fabs(cosd) + 1e-5 * fabs(t);
-        if (tr > 0 && fabs(tr - t) <= slack) {
+        double tr = h / cosd, dt = fabs(tr - t);
+        if (tr > 0 && (dt <= 1e-5 * fabs(t) ||
+                       dt * fabs(cosd) <= RP_RAYCAST_REFINE_ULPS * FLT_EPSILON * (mag + delta + rc->fmag[face]) +
+                                              4 * delta)) {
             t = tr;
-            p = rp_v3_madd(o, d, tr);
+            refined = 1;
         }
     }
+    rp_vec3 p = refined ? rp_v3_madd(o, d, t) : rp_v3_madd(o_emb, d, (double)rh->ray.tfar);
 
     hit->t = t;
     hit->p = p;
@@ -553,15 +565,16 @@ int rp_ray_closest(const rp_raycast *rc, rp_vec3 o, rp_vec3 d, double tmax, rp_h
     struct RTCRayHit rh;
     rp_rayhit_init(rc, &rh, o, du, 0.0f, tmax);
     rtcIntersect1(rc->rtc, &ctx, &rh);
-    return rp_hit_fill(rc, &rh, o, o, du, 0, hit);
+    return rp_hit_fill(rc, &rh, o, o, rp_inf_norm(rp_v3_sub(o, rc->centre)), 0, du, 0, hit);
 }
 
 /* p moved delta(p) off its plane (normal n) to the side direction d points
- * to (rule 1 of the header). */
-static rp_vec3 rp_offset(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d)
+ * to (rule 1 of the header); *mag gets |p - c|_inf and *delta delta(p). */
+static inline rp_vec3 rp_offset(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, double *mag, double *delta)
 {
-    double delta = rp_raycast_offset(rc, p);
-    return rp_v3_madd(p, n, rp_v3_dot(d, n) >= 0 ? delta : -delta);
+    *mag = rp_inf_norm(rp_v3_sub(p, rc->centre));
+    *delta = rc->offset_rel * *mag;
+    return rp_v3_madd(p, n, rp_v3_dot(d, n) >= 0 ? *delta : -*delta);
 }
 
 int rp_ray_closest_from(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, rp_hit *hit)
@@ -570,31 +583,33 @@ int rp_ray_closest_from(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, r
      * unit to rounding: the square root and division are skipped then. */
     double l2 = rp_v3_dot(d, d);
     rp_vec3 du = fabs(l2 - 1.0) <= 1e-12 || !(l2 > 0) ? d : rp_v3_scale(d, 1.0 / sqrt(l2));
-    rp_vec3 o = rp_offset(rc, p, n, du);
+    double mag, delta;
+    rp_vec3 o = rp_offset(rc, p, n, du, &mag, &delta);
     struct RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     struct RTCRayHit rh;
-    float tnear = 0.0f;
-    for (int skip = 0; skip <= RP_RAYCAST_MAX_SKIPS; skip++) {
+    rp_rayhit_init(rc, &rh, o, du, 0.0f, INFINITY);
+    rtcIntersect1(rc->rtc, &ctx, &rh);
+    int r = rp_hit_fill(rc, &rh, p, o, mag, delta, du, 1, hit);
+    /* A rejected hit (rare with an offset): trace again beyond it. */
+    for (int skip = 0; r < 0 && skip < RP_RAYCAST_MAX_SKIPS; skip++) {
+        float tnear = nextafterf(rh.ray.tfar, INFINITY);
         rp_rayhit_init(rc, &rh, o, du, tnear, INFINITY);
         rtcIntersect1(rc->rtc, &ctx, &rh);
-        int r = rp_hit_fill(rc, &rh, p, o, du, 1, hit);
-        if (r >= 0)
-            return r;
-        /* A rejected hit: trace again beyond it. */
-        tnear = nextafterf(rh.ray.tfar, INFINITY);
+        r = rp_hit_fill(rc, &rh, p, o, mag, delta, du, 1, hit);
     }
-    return 0;
+    return r > 0;
 }
 
 /* An occlusion ray for the segment a -> b between surface points (normals
  * na, nb): both ends offset off their surfaces (rule 1), shortened. */
-static double rp_segment_init(const rp_raycast *rc, struct RTCRay *ray, rp_vec3 a, rp_vec3 na, rp_vec3 b,
+static inline double rp_segment_init(const rp_raycast *rc, struct RTCRay *ray, rp_vec3 a, rp_vec3 na, rp_vec3 b,
                               rp_vec3 nb, unsigned id)
 {
     rp_vec3 ab = rp_v3_sub(b, a);
-    rp_vec3 a2 = rp_offset(rc, a, na, ab);
-    rp_vec3 b2 = rp_offset(rc, b, nb, rp_v3_scale(ab, -1.0));
+    double ma, mb, da, db;
+    rp_vec3 a2 = rp_offset(rc, a, na, ab, &ma, &da);
+    rp_vec3 b2 = rp_offset(rc, b, nb, rp_v3_scale(ab, -1.0), &mb, &db);
     rp_vec3 d = rp_v3_sub(b2, a2);
     double len = rp_v3_length(d);
     /* A degenerate segment is a free ray of length 0. */
@@ -656,7 +671,8 @@ static void rp_ray_stream(const rp_raycast *rc, size_t n, const rp_vec3 *o, size
         rtcIntersect1M(rc->rtc, &ctx, rh, (unsigned)m, sizeof rh[0]);
         for (size_t i = 0; i < m; i++) {
             rp_vec3 oi = o[(start + i) * o_stride];
-            hit_mask[start + i] = (unsigned char)rp_hit_fill(rc, &rh[i], oi, oi, du[i], 0, &hits[start + i]);
+            hit_mask[start + i] = (unsigned char)rp_hit_fill(rc, &rh[i], oi, oi, rp_inf_norm(rp_v3_sub(oi, rc->centre)),
+                                                             0, du[i], 0, &hits[start + i]);
         }
     }
 }
