@@ -504,7 +504,8 @@ static void rp_rayhit_init(const rp_raycast *rc, struct RTCRayHit *rh, rp_vec3 o
 /* Fills hit from Embree's answer to a ray that started at o_emb (the offset
  * origin actually traced, delta from o) along unit d; distances are
  * reported from o, the caller's point, which lies on the same line up to
- * the offset along n.  mag is |o - c|_inf.  With from_surface, a hit on a
+ * the offset along n.  mag is |o - c|_inf (< 0: not computed yet; it is
+ * needed only from surfaces and in a rare branch).  With from_surface, a hit on a
  * face whose plane holds o is rejected (rule 2 of the header; |o|_inf is
  * bounded by mag + |c|_inf): returns -1 then, 0 on a miss, 1 on a hit. */
 static inline int rp_hit_fill(const rp_raycast *rc, const struct RTCRayHit *rh, rp_vec3 o, rp_vec3 o_emb, double mag,
@@ -531,6 +532,8 @@ static inline int rp_hit_fill(const rp_raycast *rc, const struct RTCRayHit *rh, 
          * the face (their float magnitudes) over |cos|, and by the offset
          * between o and o_emb. */
         double tr = h / cosd, dt = fabs(tr - t);
+        if (tr > 0 && !(dt <= 1e-5 * fabs(t)) && mag < 0)
+            mag = rp_inf_norm(rp_v3_sub(o, rc->centre));
         if (tr > 0 && (dt <= 1e-5 * fabs(t) ||
                        dt * fabs(cosd) <= RP_RAYCAST_REFINE_ULPS * FLT_EPSILON * (mag + delta + rc->fmag[face]) +
                                               4 * delta)) {
@@ -565,7 +568,7 @@ int rp_ray_closest(const rp_raycast *rc, rp_vec3 o, rp_vec3 d, double tmax, rp_h
     struct RTCRayHit rh;
     rp_rayhit_init(rc, &rh, o, du, 0.0f, tmax);
     rtcIntersect1(rc->rtc, &ctx, &rh);
-    return rp_hit_fill(rc, &rh, o, o, rp_inf_norm(rp_v3_sub(o, rc->centre)), 0, du, 0, hit);
+    return rp_hit_fill(rc, &rh, o, o, -1, 0, du, 0, hit);
 }
 
 /* p moved delta(p) off its plane (normal n) to the side direction d points
@@ -671,8 +674,7 @@ static void rp_ray_stream(const rp_raycast *rc, size_t n, const rp_vec3 *o, size
         rtcIntersect1M(rc->rtc, &ctx, rh, (unsigned)m, sizeof rh[0]);
         for (size_t i = 0; i < m; i++) {
             rp_vec3 oi = o[(start + i) * o_stride];
-            hit_mask[start + i] = (unsigned char)rp_hit_fill(rc, &rh[i], oi, oi, rp_inf_norm(rp_v3_sub(oi, rc->centre)),
-                                                             0, du[i], 0, &hits[start + i]);
+            hit_mask[start + i] = (unsigned char)rp_hit_fill(rc, &rh[i], oi, oi, -1, 0, du[i], 0, &hits[start + i]);
         }
     }
 }
