@@ -6,8 +6,8 @@
  *
  * with the Monte Carlo standard error combined over the (independent) pairs,
  * sqrt(sum (A_i / A_A)^2 se_ij^2).  Both surfaces are meshed by
- * rp_mesh_create: by default with a longest edge of the scene's diagonal,
- * i.e. one element per face of a quad or triangle surface (the analytic
+ * rp_mesh_create: by default with a longest element edge equal to the
+ * longest edge of any face, i.e. one element per face (the analytic
  * method's contour integral is exact over the source and its outer
  * quadrature adaptive, so no subdivision is needed for accuracy). */
 #include <errno.h>
@@ -181,8 +181,15 @@ int rp_cmd_formfactor(int argc, char **argv)
         mp.target_count = (size_t)elements;
     else if (max_edge > 0)
         mp.max_edge = max_edge;
-    else
-        mp.max_edge = rp_scene_diagonal(scene);
+    else {
+        /* One element per face: no face has a longer edge. */
+        const rp_face *fcs = rp_scene_faces(scene);
+        const rp_vec3 *vs = rp_scene_vertices(scene);
+        for (size_t f = 0; f < rp_scene_nfaces(scene); f++)
+            for (uint32_t k = 0; k < fcs[f].nverts; k++)
+                mp.max_edge = fmax(mp.max_edge, rp_v3_length(rp_v3_sub(vs[fcs[f].v[(k + 1) % fcs[f].nverts]],
+                                                                        vs[fcs[f].v[k]])));
+    }
     rp_mesh *mesh = NULL;
     rp_raycast *rc = NULL;
     rp_ff_context *ctx = NULL;

@@ -1648,7 +1648,12 @@ static rp_status sec_acne(stab *S, rp_error *err)
         rp_scene_destroy(sc);
         return st;
     }
-    const double L = 2, diag = rp_scene_diagonal(sc);
+    /* Every face of the furnace is lit, so the ray caster's centre c is the
+     * centre of the scene's box, and the largest offset any ray gets,
+     * offset x |p - c|_inf, is offset x hmax, half the box's longest side. */
+    rp_vec3 blo, bhi;
+    rp_scene_bounds(sc, &blo, &bhi);
+    const double L = 2, hmax = 0.5 * fmax(bhi.x - blo.x, fmax(bhi.y - blo.y, bhi.z - blo.z));
     char pts[96], gss[96], sjs[96];
     snprintf(pts, sizeof pts, "pathtrace:samples=%d:batch=%d", S->quick ? 256 : 1024, S->quick ? 256 : 1024);
     snprintf(gss, sizeof gss, "gauss-seidel:elements=%d", S->quick ? 150 : 300);
@@ -1733,12 +1738,12 @@ static rp_status sec_acne(stab *S, rp_error *err)
     rp_out o;
     if ((st = rp_out_open(&o, out_path(S, path, sizeof path, "acne.csv"), err)) != RP_OK)
         return st;
-    fputs("scene,ray_offset_rel,ray_offset_abs,method,refused,mean_signed_error,worst_signed_error,worst_surface\n",
+    fputs("scene,ray_offset_rel,ray_offset_max,method,refused,mean_signed_error,worst_signed_error,worst_surface\n",
           o.f);
     for (size_t k = 0; k <= no; k++)
         for (size_t m = 0; m < nm; m++) {
             fprintf(o.f, "%s,%g,%g,%s,%d,", k < no ? "thin-coincident" : "thin-separated", rows[k].off,
-                    rows[k].off * diag, M[m].label, rows[k].failed[m]);
+                    rows[k].off * hmax, M[m].label, rows[k].failed[m]);
             if (rows[k].failed[m]) {
                 fputs(",,\n", o.f);
                 continue;
@@ -1762,7 +1767,7 @@ static rp_status sec_acne(stab *S, rp_error *err)
     if ((st = rp_out_close(&o, 1, err)) != RP_OK)
         return st;
     const char *body =
-        "@PNG\nset output 'acne.png'\nset logscale xy\nset xlabel 'ray offset / scene diagonal (0 plotted at 1e-11)'\n"
+        "@PNG\nset output 'acne.png'\nset logscale xy\nset xlabel 'ray offset, relative to the point |p - c|_inf (0 plotted at 1e-11)'\n"
         "set ylabel 'worst |relative error| of a surface average'\n"
         "set title 'Furnace with thin and coincident geometry: error against the ray offset'\n"
         "plot for [i=0:3] 'acne.dat' index i using 1:2 with linespoints lw 2 pt 7 "
@@ -1771,20 +1776,22 @@ static rp_status sec_acne(stab *S, rp_error *err)
     if ((st = stab_plot(S, "acne", body, err)) != RP_OK)
         return st;
     FILE *f = S->md;
-    fprintf(f, "## 6. Thin and coincident geometry: acne and the offset that removes it\n\n"
+    fprintf(f, "## 6. Thin and coincident geometry: acne, leaks and the ray offset\n\n"
                "A furnace rotated off the axes (every surface reflects 0.5 and emits 1: L = 2 exactly, whatever "
                "the geometry inside): a closed room, a slab %g thick hovering %g above the floor, and a "
                "zero-thickness two-sided panel (two coincident quads facing opposite ways). Every method runs "
-               "with `--ray-offset` (the self-intersection offset, relative to the scene diagonal %.4g; default "
-               "1e-5). Errors are relative, signed (negative = light lost); worst = the surface with the largest "
+               "with `--ray-offset` (a ray leaving point p starts offset x |p - c|_inf off the surface, c the "
+               "centre of the lit faces' box, so at most offset x %.4g here; default 1e-5; hits on faces whose "
+               "plane holds p are rejected at every offset). Errors are relative, signed (negative = light lost); "
+               "worst = the surface with the largest "
                "|error|. The hemicube form factors cast no visibility rays (they rasterise with their own "
                "near-plane epsilon), so `--ray-offset` does not apply to them. jacobi, southwell and "
                "direct share gauss-seidel's raycaster and form factors (solvers/radiosity/system.c), so their "
-               "visibility, and their acne, is the same.\n\n![acne](acne.png)\n\n"
+               "visibility, and their leaks, are the same.\n\n![acne](acne.png)\n\n"
                "Path-traced renders at offsets 0, 1e-5 and 1e-2: ![0](acne_pt_offset_0.png) "
                "![1e-5](acne_pt_offset_1e-05.png) ![1e-2](acne_pt_offset_0.01.png)\n\n"
-               "| offset (rel.) | offset (abs.) |",
-            thick, gap, diag);
+               "| offset (rel.) | largest offset (abs.) |",
+            thick, gap, hmax);
     for (size_t m = 0; m < nm; m++)
         fprintf(f, " %s mean | %s worst (surface) |", M[m].label, M[m].label);
     fprintf(f, "\n|---|---|");
@@ -1793,9 +1800,9 @@ static rp_status sec_acne(stab *S, rp_error *err)
     fputs("\n", f);
     for (size_t k = 0; k <= no; k++) {
         if (k < no)
-            fprintf(f, "| %g | %.3g |", rows[k].off, rows[k].off * diag);
+            fprintf(f, "| %g | %.3g |", rows[k].off, rows[k].off * hmax);
         else
-            fprintf(f, "| %g, **panel 0.002 thick** | %.3g |", rows[k].off, rows[k].off * diag);
+            fprintf(f, "| %g, **panel 0.002 thick** | %.3g |", rows[k].off, rows[k].off * hmax);
         for (size_t m = 0; m < nm; m++) {
             if (rows[k].failed[m]) {
                 fputs(" **refused** (see below) | |", f);
@@ -1815,14 +1822,16 @@ static rp_status sec_acne(stab *S, rp_error *err)
                     fputs("\nRuns the method refused (its own checks caught the damage):\n\n", f);
                 fprintf(f, "* offset %g, %s: `%s`\n", rows[k].off, M[m].label, rows[k].msg[m]);
             }
-    fprintf(f, "\n**Failure signature.** With no offset, rays start on their own face and, rounded to single "
-               "precision, re-hit it or its coincident twin about half the time: every method loses light "
-               "everywhere (acne). Offsets from about 1e-7 of the diagonal up to well below the gap (%g) give the "
-               "exact answer to the methods' noise; once the offset exceeds the gap between slab and floor "
-               "(offset x diagonal > %g), rays leaving the floor under the slab start inside it and those "
-               "leaving the slab's underside start below the floor: light leaks and the surfaces there go "
-               "dark. The coincident panel is a separate artefact no offset removes: a ray *arriving* at it meets "
-               "two faces at the same distance, and Embree reports the back-facing one about half the time, so "
+    fprintf(f, "\n**Failure signature.** No acne at any offset: a ray leaving a surface may start on it (offset "
+               "0), because a hit on a face whose plane holds the ray's origin, which no real hit can be, is "
+               "rejected in double precision (geometry/raycast.c, rule 2; before, rays started on their own "
+               "face re-hit it or its coincident twin about half the time and every method lost light "
+               "everywhere). Offsets from 0 up to well below the gap (%g) give the same answer to the "
+               "methods' noise; once the offset exceeds the gap between slab and floor (offset x |p - c|_inf "
+               "> %g under the slab), rays leaving the floor there start inside the slab and those leaving "
+               "the slab's underside start below the floor: light leaks and the surfaces there go dark. The "
+               "coincident panel is a separate artefact no offset removes: a ray *arriving* at it meets two "
+               "faces at the same distance, and Embree reports the back-facing one about half the time, so "
                "light sent to the panel is lost (the Monte Carlo methods' worst surfaces at every offset: the "
                "panel itself, or the wall facing it). Giving the panel a thickness (last row: a closed box "
                "0.002 thick, default offset) removes it.\n\n",

@@ -22,14 +22,18 @@
  * (sqrt 3 / 2) * longest edge / shortest altitude. */
 #include "mesh.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-/* Corners of one surface closer than this fraction of the scene diagonal
- * are one vertex.  Scene files repeat coordinates verbatim, so this only has
- * to absorb rounding in generated geometry (box expansion, mesh import). */
+/* Corners of one surface closer than this fraction of the surface's own
+ * bounding-box diagonal, plus WELD_ULPS double ulps of its largest
+ * coordinate, are one vertex.  Scene files repeat coordinates verbatim, so
+ * this only has to absorb rounding in generated geometry (box expansion,
+ * mesh import); it never depends on the rest of the scene. */
 #define WELD_REL_TOL 1e-10
+#define WELD_ULPS 64.0
 /* Side of the cells corners are sorted into, in units of the tolerance. */
 #define WELD_CELL 1024.0
 
@@ -155,12 +159,13 @@ static double class_count(double length, double h)
 }
 
 /* Total element count for longest edge h; face f's classes are fc[2f] (u)
- * and fc[2f + 1] (v, quads only). */
-static double total_count(const double *class_len, size_t nclass, const uint32_t *fc,
-                          const face_grid *faces, size_t nfaces, double h, double *cc)
+ * and fc[2f + 1] (v, quads only).  Classes of black surfaces (black[c]) are
+ * never cut. */
+static double total_count(const double *class_len, const unsigned char *black, size_t nclass,
+                          const uint32_t *fc, const face_grid *faces, size_t nfaces, double h, double *cc)
 {
     for (size_t c = 0; c < nclass; c++)
-        cc[c] = class_count(class_len[c], h);
+        cc[c] = black[c] ? 1.0 : class_count(class_len[c], h);
     double total = 0;
     for (size_t f = 0; f < nfaces; f++) {
         double a = cc[fc[2 * f]];
@@ -172,17 +177,19 @@ static double total_count(const double *class_len, size_t nclass, const uint32_t
 /* The longest edge giving the element count closest to target: the count
  * is a non-increasing step function of h, so bisect (in log h) for the step
  * where it crosses target and keep the closer side. */
-static double find_max_edge(const double *class_len, size_t nclass, const uint32_t *fc,
-                            const face_grid *faces, size_t nfaces, size_t target, double *cc)
+static double find_max_edge(const double *class_len, const unsigned char *black, size_t nclass,
+                            const uint32_t *fc, const face_grid *faces, size_t nfaces, size_t target, double *cc)
 {
     double hmax = 0;
     for (size_t c = 0; c < nclass; c++)
-        if (class_len[c] > hmax)
+        if (!black[c] && class_len[c] > hmax)
             hmax = class_len[c];
+    if (!(hmax > 0))
+        return 1.0; /* every class is black: nothing to cut */
     double t = (double)target;
     /* One element per face is as coarse as it gets. */
     double hi = hmax;
-    double nhi = total_count(class_len, nclass, fc, faces, nfaces, hi, cc);
+    double nhi = total_count(class_len, black, nclass, fc, faces, nfaces, hi, cc);
     if (nhi >= t)
         return hi;
     double lo = hi, nlo = nhi;
@@ -190,7 +197,7 @@ static double find_max_edge(const double *class_len, size_t nclass, const uint32
         hi = lo;
         nhi = nlo;
         lo *= 0.5;
-        nlo = total_count(class_len, nclass, fc, faces, nfaces, lo, cc);
+        nlo = total_count(class_len, black, nclass, fc, faces, nfaces, lo, cc);
     }
     if (!(lo > 0))
         return 0;
@@ -199,7 +206,7 @@ static double find_max_edge(const double *class_len, size_t nclass, const uint32
         double mid = sqrt(lo * hi);
         if (!(mid > lo && mid < hi))
             break;
-        double nmid = total_count(class_len, nclass, fc, faces, nfaces, mid, cc);
+        double nmid = total_count(class_len, black, nclass, fc, faces, nfaces, mid, cc);
         if (nmid >= t) {
             lo = mid;
             nlo = nmid;
@@ -408,7 +415,9 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     rp_vec3 *wpos = NULL;
     uint32_t *ue_a = NULL, *ue_b = NULL, *eparent = NULL, *ue_class = NULL, *edge_first = NULL;
     uint32_t *class_of_root = NULL, *grid = NULL;
-    double *class_len = NULL, *cc = NULL;
+    double *class_len = NULL, *cc = NULL, *stol = NULL;
+    rp_vec3 *slo = NULL, *shi = NULL;
+    unsigned char *black = NULL;
     edge_rec *elrec = NULL;
     size_t *vfill = NULL;
     if (!mesh || !parent || !wid || !edge_of || !keys || !erec || !fc) {
@@ -423,8 +432,18 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     if (!mesh->faces || !mesh->surf_first || !mesh->surf_count)
         goto nomem;
 
-    /* Face corners and the scale the weld tolerance is relative to. */
-    rp_vec3 lo = rp_v3(INFINITY, INFINITY, INFINITY), hi = rp_v3(-INFINITY, -INFINITY, -INFINITY);
+    /* Face corners and, per surface, the box and magnitude its weld
+     * tolerance is relative to. */
+    slo = malloc((nsurf ? nsurf : 1) * sizeof *slo);
+    shi = malloc((nsurf ? nsurf : 1) * sizeof *shi);
+    stol = malloc((nsurf ? nsurf : 1) * sizeof *stol);
+    if (!slo || !shi || !stol)
+        goto nomem;
+    for (size_t s = 0; s < nsurf; s++) {
+        slo[s] = rp_v3(INFINITY, INFINITY, INFINITY);
+        shi[s] = rp_v3(-INFINITY, -INFINITY, -INFINITY);
+        stol[s] = -INFINITY; /* the largest coordinate first */
+    }
     for (size_t f = 0; f < nfaces; f++) {
         face_grid *fg = &mesh->faces[f];
         fg->nverts = sf[f].nverts;
@@ -433,21 +452,25 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
             st = rp_error_set(err, RP_ERR_INPUT, "mesh: face %zu has %u vertices", f, fg->nverts);
             goto fail;
         }
+        const uint32_t s = sf[f].surface;
         for (uint32_t c = 0; c < fg->nverts; c++) {
             rp_vec3 p = sv[sf[f].v[c]];
             fg->c[c] = p;
-            lo = rp_v3(fmin(lo.x, p.x), fmin(lo.y, p.y), fmin(lo.z, p.z));
-            hi = rp_v3(fmax(hi.x, p.x), fmax(hi.y, p.y), fmax(hi.z, p.z));
+            slo[s] = rp_v3(fmin(slo[s].x, p.x), fmin(slo[s].y, p.y), fmin(slo[s].z, p.z));
+            shi[s] = rp_v3(fmax(shi[s].x, p.x), fmax(shi[s].y, p.y), fmax(shi[s].z, p.z));
+            stol[s] = fmax(stol[s], fmax(fabs(p.x), fmax(fabs(p.y), fabs(p.z))));
         }
     }
-    double diag = nfaces ? rp_v3_length(rp_v3_sub(hi, lo)) : 0;
-    double tol = WELD_REL_TOL * diag;
+    for (size_t s = 0; s < nsurf; s++)
+        stol[s] = slo[s].x <= shi[s].x
+                      ? WELD_REL_TOL * rp_v3_length(rp_v3_sub(shi[s], slo[s])) + WELD_ULPS * DBL_EPSILON * stol[s]
+                      : 0;
 
     /* Weld corners within each surface.  Corners are sorted by cell of a
-     * grid of side WELD_CELL * tol; two corners closer than tol share a cell
-     * or sit within tol of a common cell face, so only a corner that near a
-     * face of its cell needs to look in the neighbouring cells. */
-    const double cell = WELD_CELL * tol;
+     * grid of side WELD_CELL * tol (the surface's tol, from its own box);
+     * two corners closer than tol share a cell or sit within tol of a
+     * common cell face, so only a corner that near a face of its cell needs
+     * to look in the neighbouring cells. */
     size_t nkeys = 0;
     for (size_t f = 0; f < nfaces; f++)
         for (uint32_t c = 0; c < 4; c++) {
@@ -456,7 +479,8 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
             wid[s] = RP_NONE;
             if (c >= sf[f].nverts)
                 continue;
-            rp_vec3 p = mesh->faces[f].c[c];
+            rp_vec3 p = mesh->faces[f].c[c], lo = slo[sf[f].surface];
+            const double cell = WELD_CELL * stol[sf[f].surface];
             weld_key *k = &keys[nkeys++];
             k->surface = sf[f].surface;
             k->ix = cell > 0 ? (int64_t)floor((p.x - lo.x) / cell) : 0;
@@ -467,7 +491,8 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     qsort(keys, nkeys, sizeof *keys, weld_cmp);
     for (size_t i = 0; i < nkeys; i++) {
         const weld_key *ki = &keys[i];
-        rp_vec3 pi = mesh->faces[ki->slot / 4].c[ki->slot % 4];
+        rp_vec3 pi = mesh->faces[ki->slot / 4].c[ki->slot % 4], lo = slo[ki->surface];
+        const double tol = stol[ki->surface], cell = WELD_CELL * tol;
         /* Own cell: the run after i (pairs before i were seen from them). */
         for (size_t j = i + 1; j < nkeys && weld_cmp_cell(&keys[j], ki) == 0; j++) {
             rp_vec3 pj = mesh->faces[keys[j].slot / 4].c[keys[j].slot % 4];
@@ -523,7 +548,7 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
                 if (wid[4 * f + c] == wid[4 * f + c2]) {
                     st = rp_error_set(err, RP_ERR_INPUT,
                                       "mesh: face %zu of surface '%s' has corners %u and %u closer than %g",
-                                      f, surf[sf[f].surface].name, c, c2, tol);
+                                      f, surf[sf[f].surface].name, c, c2, stol[sf[f].surface]);
                     goto fail;
                 }
 
@@ -585,21 +610,35 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
         if (len > class_len[ue_class[i]])
             class_len[ue_class[i]] = len;
     }
+    /* A surface black in every band (neither reflects nor emits: a ground
+     * plane that only blocks light) has radiosity 0 everywhere, so its
+     * faces are never cut, and a target count is spread over the others
+     * alone: adding a black plane, however large, leaves the rest of the
+     * mesh as it was.  Classes never join two surfaces. */
+    black = calloc(nclass ? nclass : 1, 1);
+    if (!black)
+        goto nomem;
+    const size_t nb = rp_scene_nbands(scene);
     for (size_t f = 0; f < nfaces; f++) {
         fc[2 * f] = ue_class[edge_of[4 * f]];
         fc[2 * f + 1] = ue_class[edge_of[4 * f + 1]];
+        const rp_material *mat = rp_scene_face_material(scene, (uint32_t)f);
+        int lit = 0;
+        for (size_t b = 0; b < nb; b++)
+            lit |= mat->rho[b] > 0 || mat->Le[b] > 0;
+        black[fc[2 * f]] = black[fc[2 * f + 1]] = (unsigned char)!lit;
     }
 
     /* The longest element edge. */
     if (max_edge == 0) {
-        max_edge = find_max_edge(class_len, nclass, fc, mesh->faces, nfaces, target, cc);
+        max_edge = find_max_edge(class_len, black, nclass, fc, mesh->faces, nfaces, target, cc);
         if (!(max_edge > 0) && nfaces > 0) {
             st = rp_error_set(err, RP_ERR_INPUT, "mesh: no subdivision reaches %zu elements", target);
             goto fail;
         }
     }
     mesh->max_edge = max_edge;
-    double ntotal = total_count(class_len, nclass, fc, mesh->faces, nfaces, max_edge, cc);
+    double ntotal = total_count(class_len, black, nclass, fc, mesh->faces, nfaces, max_edge, cc);
 
     /* Vertex count: welded corners, edge interiors, face interiors. */
     double nvert_d = (double)nweld;
@@ -828,6 +867,10 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     free(class_len);
     free(cc);
     free(edge_first);
+    free(slo);
+    free(shi);
+    free(stol);
+    free(black);
     *out = mesh;
     return RP_OK;
 
@@ -852,6 +895,10 @@ fail:
     free(class_len);
     free(cc);
     free(edge_first);
+    free(slo);
+    free(shi);
+    free(stol);
+    free(black);
     rp_mesh_destroy(mesh);
     return st;
 }

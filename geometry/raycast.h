@@ -1,9 +1,11 @@
 /* Ray casting through Embree 3: the only module that calls rtc*.
  *
  * Built once over every face of a scene (triangles and quads), then shared
- * read-only by all threads.  Rays start offset from surfaces by an epsilon
- * scaled to the scene's size, so a ray leaving a surface does not hit it
- * again (self-intersection). */
+ * read-only by all threads.  A ray leaving a surface starts a little off
+ * it (an offset relative to the point's own coordinates), and hits on any
+ * face whose plane holds the ray's origin are rejected, so it does not hit
+ * its own surface again (self-intersection), whatever the scene's size or
+ * units (raycast.c, "Precision"). */
 #ifndef RP_RAYCAST_H
 #define RP_RAYCAST_H
 
@@ -31,16 +33,21 @@ rp_status rp_raycast_create(const rp_scene *scene, const rp_mesh *mesh,
                             rp_raycast **out, rp_error *err);
 void rp_raycast_destroy(rp_raycast *rc);
 
-/* The self-intersection epsilon, scaled to the scene. */
-double rp_raycast_epsilon(const rp_raycast *rc);
+/* The distance off its surface at which a ray leaving surface point p
+ * starts: the relative offset times p's largest coordinate as the ray
+ * caster holds it, |p - c|_inf, c a centre of the lit part of the scene
+ * (see raycast.c). */
+double rp_raycast_offset(const rp_raycast *rc, rp_vec3 p);
 
-/* The default offset, relative to the scene diagonal (see raycast.c). */
+/* The default relative offset (about 170 float ulps of the point's
+ * coordinates). */
 #define RP_RAYCAST_DEFAULT_OFFSET 1e-5
 
-/* Sets the self-intersection epsilon to rel times the scene diagonal
- * (rel >= 0; 0 starts rays on the surface itself, which lets them re-hit
- * it: "acne").  For experiments (radpt experiment stability); call before
- * the raycaster is shared between threads. */
+/* Sets the relative offset (rel >= 0; 0 starts rays on the surface itself,
+ * where the rejection of hits on planes holding the origin still keeps
+ * them off it; an offset above a real gap makes rays start beyond it:
+ * leaks).  For experiments (radpt experiment stability); call before the
+ * raycaster is shared between threads. */
 void rp_raycast_set_offset(rp_raycast *rc, double rel);
 
 /* Closest hit along o + t d, t in (0, tmax]; d need not be unit.
@@ -49,11 +56,13 @@ int rp_ray_closest(const rp_raycast *rc, rp_vec3 o, rp_vec3 d, double tmax, rp_h
 
 /* Closest hit of a ray leaving surface point p with normal n (the face's
  * front normal) in direction d: the origin is offset along +-n to the side
- * d points to. */
+ * d points to, and hits on faces whose plane holds p (the face left and
+ * any coplanar one) are skipped. */
 int rp_ray_closest_from(const rp_raycast *rc, rp_vec3 p, rp_vec3 n, rp_vec3 d, rp_hit *hit);
 
 /* 1 if the segment between surface points a (normal na) and b (normal nb)
- * is blocked by any face; both ends are offset off their surfaces. */
+ * is blocked by any face; both ends are offset off their surfaces, and
+ * faces whose plane holds a or b never block. */
 int rp_ray_occluded(const rp_raycast *rc, rp_vec3 a, rp_vec3 na, rp_vec3 b, rp_vec3 nb);
 
 /* rp_ray_occluded for n segments a[i] -> b[i] between two surfaces

@@ -20,9 +20,14 @@
  *   600:15.6 700:18.4) to (17, 11.8, 4), the RGB radiance in common use.
  * - Degenerate faces: a triangle whose edge vectors have a cross product
  *   below 1e-10 of its longest edge squared (angle below 1e-10 rad) or a
- *   quad whose diagonals do likewise; and any face with area below
- *   (1e-7 * scene diagonal)^2, i.e. smaller than the weld tolerance that
- *   rp_scene_is_closed uses.
+ *   quad whose diagonals do likewise; and any face whose area is below
+ *   (1e-9 * its own largest coordinate)^2: a speck whose edges, normal and
+ *   area would be the rounding of its corners (relative error above about
+ *   2e-7).  Neither test looks at the rest of the scene, so adding a huge
+ *   ground plane refuses nothing.
+ * - rp_scene_is_closed welds corners closer than 1e-7 of the shortest edge
+ *   in the scene: far below any real feature (no face can collapse), yet
+ *   far above the rounding of generated corners.
  * - Quads: planar when the two diagonals are at most 1e-6 of the longer
  *   diagonal apart along the quad's normal (the normal is the direction of
  *   diagonal x diagonal, so the twist is |(v1 - v0) . n|).  At that twist the
@@ -73,7 +78,8 @@
 
 #define RELATIVE_COLLINEAR 1e-10 /* sine of the smallest corner angle */
 #define RELATIVE_TWIST 1e-6      /* quad twist / longest diagonal */
-#define RELATIVE_WELD 1e-7       /* weld tolerance / scene diagonal */
+#define RELATIVE_WELD 1e-7       /* weld tolerance / shortest edge */
+#define RELATIVE_SPECK 1e-9      /* smallest face size / its largest coordinate */
 #define MAX_INCLUDE_DEPTH 64
 #define MAX_IMAGE_SIZE 65536
 
@@ -1515,21 +1521,27 @@ static void compute_bounds(rp_scene *s)
         s->total_area += s->surfaces[i].area;
 }
 
-/* Checks that need the whole scene: its scale and its emitters.  A scene
+/* Checks that need the whole scene: specks and its emitters.  A scene
  * without an emitter is blamed on name:line (its last line; 0: no line). */
 static rp_status finish(parser *p, const char *name, int line)
 {
     rp_scene *s = p->s;
     compute_bounds(s);
-    double diag = rp_scene_diagonal(s);
-    double tiny = RELATIVE_WELD * diag * RELATIVE_WELD * diag;
-    for (size_t f = 0; f < s->nfaces; f++)
+    for (size_t f = 0; f < s->nfaces; f++) {
+        double m = 0;
+        for (uint32_t k = 0; k < s->faces[f].nverts; k++) {
+            rp_vec3 v = s->vertices[s->faces[f].v[k]];
+            m = fmax(m, fmax(fabs(v.x), fmax(fabs(v.y), fabs(v.z))));
+        }
+        double tiny = RELATIVE_SPECK * m * RELATIVE_SPECK * m;
         if (!(s->faces[f].area > tiny)) {
             const rp_surface *surf = &s->surfaces[s->faces[f].surface];
             return fail(p, surf->file, surf->line,
-                        "degenerate face in '%s' (area %g, below (1e-7 x scene diagonal %g)^2)", surf->name,
-                        s->faces[f].area, diag);
+                        "degenerate face in '%s' (area %g, below (1e-9 x its largest coordinate %g)^2: "
+                        "its shape would be rounding)",
+                        surf->name, s->faces[f].area, m);
         }
+    }
     int emitting = 0;
     for (size_t i = 0; i < s->nsurfaces; i++)
         if (s->materials[s->surfaces[i].material].emitter)
@@ -1910,7 +1922,14 @@ int rp_scene_is_closed(const rp_scene *s)
             t++;
         }
     }
-    int r = rp_cgal_is_closed(xyz, s->nvertices, tri, ntri, RELATIVE_WELD * rp_scene_diagonal(s));
+    /* The weld tolerance, from the shortest edge (the header comment). */
+    double shortest = INFINITY;
+    for (size_t i = 0; i < s->nfaces; i++)
+        for (uint32_t k = 0; k < s->faces[i].nverts; k++) {
+            rp_vec3 a = s->vertices[s->faces[i].v[k]], b = s->vertices[s->faces[i].v[(k + 1) % s->faces[i].nverts]];
+            shortest = fmin(shortest, rp_v3_length(rp_v3_sub(b, a)));
+        }
+    int r = rp_cgal_is_closed(xyz, s->nvertices, tri, ntri, RELATIVE_WELD * shortest);
     free(xyz);
     free(tri);
     return r;

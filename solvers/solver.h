@@ -146,13 +146,15 @@ rp_status rp_options_uint(const rp_options *o, const char *name, unsigned long l
 rp_status rp_options_check(const rp_options *o, const rp_solver_type *type, rp_error *err);
 
 /* --ray-offset EPS: the self-intersection offset of rays leaving a surface,
- * relative to the scene diagonal (geometry/raycast.h); methods that cast
- * rays list it and apply it to their raycaster.  Absent, the raycaster
+ * relative to the largest coordinate of the point they leave, measured from
+ * the centre of the lit part of the scene (geometry/raycast.h); methods that
+ * cast rays list it and apply it to their raycaster.  Absent, the raycaster
  * keeps its default (bit-identical to not having the option). */
 #define RP_RAY_OFFSET_OPTION                                                                 \
     {"ray-offset", "EPS",                                                                    \
-     "self-intersection offset of rays leaving a surface, relative to the scene diagonal "  \
-     "(0: none; for experiments on acne and leaks)",                                        \
+     "rays leaving a surface point p start EPS x |p - c|_inf off the surface (c: the centre of " \
+     "the faces that reflect or emit; 1e-5 is about 170 float ulps of p); hits on faces whose " \
+     "plane holds p are rejected at any EPS (0: no offset; for experiments on leaks)",      \
      "1e-5"}
 struct rp_raycast;
 rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_error *err);

@@ -4,7 +4,9 @@
  * Moller-Trumbore intersection (Moller & Trumbore 1997) over every face,
  * written here and independent of Embree; occlusion against the closed-form
  * midpoint of a segment between two parallel planes; self-intersection with
- * 1e5 grazing rays; element ids against a point-in-polygon search over the
+ * 1e5 grazing rays, and on a face 2e6 wide 3.7e7 from the origin against
+ * the double-precision distance to a wall across it; a 1e-4 gap beside a
+ * black plane 1e8 wide; element ids against a point-in-polygon search over the
  * face's elements.  Scenes come from rp_scene_parse.  Also a smoke test of
  * the ray-throughput benchmark (bench/raybench.h). */
 #include <criterion/criterion.h>
@@ -489,30 +491,48 @@ Test(raycast, occlusion_blocker_facing_up) { check_occlusion(1, 1); }
 
 /* ---- epsilon and self-intersection ------------------------------------ */
 
-Test(raycast, epsilon_scales_with_scene)
+/* The offset follows the point, not the scene: 1e-5 of |p - c|_inf, c the
+ * centre of the lit faces' box, which a black plane does not move. */
+Test(raycast, offset_follows_the_point)
 {
     rp_scene *s = occlusion_scene(1, 1);
     rp_raycast *rc = make_rc(s, NULL);
-    /* Bounds [0,1] x [0,2] x [0,1]: diagonal sqrt(6). */
-    cr_expect_float_eq(rp_scene_diagonal(s), sqrt(6.0), 1e-12);
-    cr_expect_float_eq(rp_raycast_epsilon(rc), 1e-5 * sqrt(6.0), 1e-15);
+    /* Lit box [0,1] x [0,2] x [0,1]: c = (0.5, 1, 0.5). */
+    cr_expect_float_eq(rp_raycast_offset(rc, rp_v3(0, 0, 0)), 1e-5, 1e-18);
+    cr_expect_float_eq(rp_raycast_offset(rc, rp_v3(0.5, 1.25, 0.4)), 1e-5 * 0.25, 1e-18);
+    rp_raycast_set_offset(rc, 1e-3);
+    cr_expect_float_eq(rp_raycast_offset(rc, rp_v3(1, 2, 1)), 1e-3, 1e-18);
+    rp_raycast_destroy(rc);
+    rp_scene_destroy(s);
+
+    text t;
+    text_begin(&t);
+    fputs("material black reflect 0\n", t.f);
+    put_quad(&t, "floor", "w", rp_v3(0, 0, 0), rp_v3(0, 0, 1), rp_v3(1, 0, 1), rp_v3(1, 0, 0));
+    put_quad(&t, "ceiling", "lamp", rp_v3(0, 2, 0), rp_v3(1, 2, 0), rp_v3(1, 2, 1), rp_v3(0, 2, 1));
+    put_quad(&t, "ground", "black", rp_v3(-1e8, -1, -1e8), rp_v3(-1e8, -1, 1e8), rp_v3(1e8, -1, 1e8),
+             rp_v3(1e8, -1, -1e8));
+    s = text_parse(&t);
+    rc = make_rc(s, NULL);
+    cr_expect_float_eq(rp_raycast_offset(rc, rp_v3(0, 0, 0)), 1e-5, 1e-18);
     rp_raycast_destroy(rc);
     rp_scene_destroy(s);
 }
 
-/* Two parallel squares 20 eps apart: a ray leaving one surface toward the
- * other must still find it (the offset must not jump real gaps). */
+/* Two parallel squares 20 offsets apart: a ray leaving one surface toward
+ * the other must still find it (the offset must not jump real gaps). */
 Test(raycast, small_gap_is_not_skipped)
 {
     const double L = 100.0;
-    double gap = 20 * 1e-5 * sqrt(2.0) * L; /* 20 eps: the diagonal is ~ L sqrt 2 */
+    /* |p - c|_inf <= L / 2 on both squares (c is their centre). */
+    double gap = 20 * 1e-5 * 0.5 * L;
     text t;
     text_begin(&t);
     put_quad(&t, "a", "w", rp_v3(0, 0, 0), rp_v3(L, 0, 0), rp_v3(L, L, 0), rp_v3(0, L, 0));
     put_quad(&t, "b", "lamp", rp_v3(0, 0, gap), rp_v3(0, L, gap), rp_v3(L, L, gap), rp_v3(L, 0, gap));
     rp_scene *s = text_parse(&t);
     rp_raycast *rc = make_rc(s, NULL);
-    cr_assert_float_eq(rp_raycast_epsilon(rc), 1e-5 * rp_scene_diagonal(s), 1e-15);
+    cr_assert_leq(rp_raycast_offset(rc, rp_v3(0, 0, 0)), gap / 20 * (1 + 1e-12));
     gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
     gsl_rng_set(r, 5);
     for (int i = 0; i < 1000; i++) {
@@ -588,6 +608,125 @@ Test(raycast, grazing_rays_miss_their_own_face)
     }
     /* The wall subtends at least ~1/4 of the directions from every point. */
     cr_assert_gt(wall, 20000, "%d rays reached the wall", wall);
+    gsl_rng_free(r);
+    rp_raycast_destroy(rc);
+    rp_scene_destroy(s);
+}
+
+/* Rule 2 of raycast.c: a tilted quad 2e6 wide, centred 3.7e7 from the
+ * origin, with points leaving it within 0.4 of its centre.  Its float
+ * vertices (relative to the centre, ulp 0.0625) put Embree's plane up to a
+ * few hundredths off, far beyond the offset there (4e-6), so only the
+ * rejection of hits on the plane holding the origin keeps rays off it.
+ * A small lamp wall stands across the quad 0.5 from its centre: grazing
+ * rays toward it must reach it at the double-precision distance, and
+ * segments to it must be clear both ways.  (An offset relative to the
+ * scene's diagonal, 28 here, starts the rays above the wall.) */
+Test(raycast, rays_leave_a_huge_face_far_from_the_origin)
+{
+    rp_vec3 base = rp_v3(3.0e7, -1.0e7, 2.0e7);
+    rp_vec3 n = rp_v3_normalize(rp_v3(1, 2, 3)), t1, t2;
+    rp_v3_basis(n, &t1, &t2);
+    const double H = 1e6;
+    rp_vec3 v0 = rp_v3_add(base, rp_v3_add(rp_v3_scale(t1, -H), rp_v3_scale(t2, -H)));
+    rp_vec3 v1 = rp_v3_add(base, rp_v3_add(rp_v3_scale(t1, H), rp_v3_scale(t2, -H)));
+    rp_vec3 v2 = rp_v3_add(base, rp_v3_add(rp_v3_scale(t1, H), rp_v3_scale(t2, H)));
+    rp_vec3 v3 = rp_v3_add(base, rp_v3_add(rp_v3_scale(t1, -H), rp_v3_scale(t2, H)));
+    rp_vec3 c = rp_v3_madd(base, t1, 0.5);
+    rp_vec3 w0 = rp_v3_add(c, rp_v3_add(rp_v3_scale(t2, -1), rp_v3_scale(n, -1)));
+    rp_vec3 w1 = rp_v3_add(c, rp_v3_add(rp_v3_scale(t2, 1), rp_v3_scale(n, -1)));
+    rp_vec3 w2 = rp_v3_add(c, rp_v3_add(rp_v3_scale(t2, 1), rp_v3_scale(n, 1)));
+    rp_vec3 w3 = rp_v3_add(c, rp_v3_add(rp_v3_scale(t2, -1), rp_v3_scale(n, 1)));
+    rp_vec3 wn = rp_v3_cross(rp_v3_sub(w1, w0), rp_v3_sub(w3, w0));
+    text t;
+    text_begin(&t);
+    int quad_up = rp_v3_dot(rp_v3_cross(rp_v3_sub(v1, v0), rp_v3_sub(v3, v0)), n) > 0;
+    if (quad_up)
+        put_quad(&t, "huge", "w", v0, v1, v2, v3);
+    else
+        put_quad(&t, "huge", "w", v0, v3, v2, v1);
+    /* the wall faces -t1, toward the points */
+    if (rp_v3_dot(wn, t1) < 0)
+        put_quad(&t, "wall", "lamp", w0, w1, w2, w3);
+    else
+        put_quad(&t, "wall", "lamp", w0, w3, w2, w1);
+    rp_scene *s = text_parse(&t);
+    rp_raycast *rc = make_rc(s, NULL);
+    const rp_face *faces = rp_scene_faces(s);
+    uint32_t own = rp_scene_surfaces(s)[0].first_face, wallf = rp_scene_surfaces(s)[1].first_face;
+    rp_vec3 fn = faces[own].normal, nw = faces[wallf].normal;
+    cr_assert_gt(rp_v3_dot(fn, n), 0.999999);
+    cr_assert_lt(rp_v3_dot(nw, t1), -0.999999);
+    cr_assert_lt(rp_raycast_offset(rc, base), 1e-3);
+    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
+    gsl_rng_set(r, 77);
+    int wall = 0;
+    for (int i = 0; i < 20000; i++) {
+        rp_vec3 p = rp_v3_add(base, rp_v3_add(rp_v3_scale(t1, 0.8 * gsl_rng_uniform(r) - 0.4),
+                                              rp_v3_scale(t2, 0.8 * gsl_rng_uniform(r) - 0.4)));
+        /* p on the quad's plane, as a hit point would be */
+        p = rp_v3_madd(p, fn, rp_v3_dot(rp_v3_sub(v0, p), fn));
+        double phi = 2 * PI * gsl_rng_uniform(r);
+        /* every other ray grazing (within 0.01 degree, every 16th exactly in
+         * the plane), the rest cosine-distributed */
+        double el = i % 2 ? asin(sqrt(gsl_rng_uniform(r)))
+                          : (i % 16 == 0 ? 0.0 : gsl_rng_uniform(r) * 0.01 * PI / 180);
+        rp_vec3 tang = rp_v3_add(rp_v3_scale(t1, cos(phi)), rp_v3_scale(t2, sin(phi)));
+        rp_vec3 d = rp_v3_add(rp_v3_scale(tang, cos(el)), rp_v3_scale(fn, sin(el)));
+        rp_hit h;
+        if (rp_ray_closest_from(rc, p, fn, d, &h)) {
+            cr_assert_neq(h.face, own, "ray %d (elevation %g rad) hit its own face at t = %g", i, el, h.t);
+            double tw = rp_v3_dot(rp_v3_sub(c, p), t1) / rp_v3_dot(d, t1);
+            cr_assert_float_eq(h.t, tw, 1e-6 * tw, "ray %d", i);
+            cr_assert_eq(h.front, 1);
+            wall++;
+        }
+        /* a segment to a point on the wall's upper half, both ways */
+        rp_vec3 y = rp_v3_add(c, rp_v3_add(rp_v3_scale(t2, 1.8 * gsl_rng_uniform(r) - 0.9),
+                                           rp_v3_scale(n, 0.9 * gsl_rng_uniform(r) + 1e-3)));
+        cr_assert_eq(rp_ray_occluded(rc, p, fn, y, nw), 0, "segment %d", i);
+        cr_assert_eq(rp_ray_occluded(rc, y, nw, p, fn), 0, "segment %d reversed", i);
+    }
+    /* the wall subtends a good share of the grazing directions */
+    cr_assert_gt(wall, 1000, "%d rays reached the wall", wall);
+    gsl_rng_free(r);
+    rp_raycast_destroy(rc);
+    rp_scene_destroy(s);
+}
+
+/* A gap of 1e-4 between two unit squares, next to a black ground plane
+ * 1e8 wide: rays and segments from one square reach the other across the
+ * gap (the offset, 1e-5 of the point's distance from the lit faces'
+ * centre, is at most 5e-6 there; one relative to the scene's diagonal
+ * would be 1.4e3). */
+Test(raycast, tiny_gap_beside_a_huge_black_plane)
+{
+    const double g = 1e-4;
+    text t;
+    text_begin(&t);
+    fputs("material black reflect 0\n", t.f);
+    put_quad(&t, "a", "w", rp_v3(0, 0, 0), rp_v3(1, 0, 0), rp_v3(1, 1, 0), rp_v3(0, 1, 0));
+    put_quad(&t, "b", "lamp", rp_v3(0, 0, g), rp_v3(0, 1, g), rp_v3(1, 1, g), rp_v3(1, 0, g));
+    put_quad(&t, "ground", "black", rp_v3(-5e7, -5e7, -1), rp_v3(5e7, -5e7, -1), rp_v3(5e7, 5e7, -1),
+             rp_v3(-5e7, 5e7, -1));
+    rp_scene *s = text_parse(&t);
+    rp_raycast *rc = make_rc(s, NULL);
+    gsl_rng *r = gsl_rng_alloc(gsl_rng_mt19937);
+    gsl_rng_set(r, 8);
+    rp_vec3 up = rp_v3(0, 0, 1), down = rp_v3(0, 0, -1);
+    for (int i = 0; i < 5000; i++) {
+        rp_vec3 p = rp_v3(0.1 + 0.8 * gsl_rng_uniform(r), 0.1 + 0.8 * gsl_rng_uniform(r), 0);
+        rp_vec3 d = rp_v3_normalize(rp_v3(gsl_rng_uniform(r) - 0.5, gsl_rng_uniform(r) - 0.5, 0.05 + gsl_rng_uniform(r)));
+        rp_hit h;
+        cr_assert_eq(rp_ray_closest_from(rc, p, up, d, &h), 1, "ray %d", i);
+        cr_assert_eq(h.surface, 1u, "ray %d hit surface %u", i, h.surface);
+        cr_assert_float_eq(h.t, g / d.z, 1e-9, "ray %d", i);
+        cr_assert_eq(rp_ray_closest_from(rc, h.p, h.n, rp_v3(d.x, d.y, -d.z), &h), 1);
+        cr_assert_eq(h.surface, 0u);
+        cr_assert_float_eq(h.p.z, 0.0, 1e-12);
+        rp_vec3 q = rp_v3(p.x + 0.1 * (gsl_rng_uniform(r) - 0.5), p.y + 0.1 * (gsl_rng_uniform(r) - 0.5), g);
+        cr_assert_eq(rp_ray_occluded(rc, p, up, q, down), 0, "segment %d", i);
+    }
     gsl_rng_free(r);
     rp_raycast_destroy(rc);
     rp_scene_destroy(s);

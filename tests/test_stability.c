@@ -262,20 +262,33 @@ Test(stability, quick_atlas, .timeout = 240)
     cr_expect_eq(seen, 2);
     csv_free(c);
 
-    /* 6. the furnace says L = 2: with no ray offset every method loses
-     * light (acne); with the panel given a thickness and the default
-     * offset the path tracer's and Gauss-Seidel's area-weighted means are
+    /* 6. the furnace says L = 2: with no ray offset no method loses light
+     * to acne (hits on the plane a ray leaves are rejected): each method's
+     * area-weighted mean at offset 0 is within 0.005 of its mean at the
+     * default offset (the same seeds; the coincident panel costs both the
+     * same); at offset 1e-2 (above the gap under the slab) the path tracer
+     * leaks: some surface loses over 20%; with the panel given a thickness
+     * and the default offset the path tracer's and Gauss-Seidel's means are
      * within 1% */
     c = csv_read(dir, "acne.csv");
     size_t csc = col(c, "scene"), coff = col(c, "ray_offset_rel"), cam = col(c, "method"), cref = col(c, "refused"),
-           cmean = col(c, "mean_signed_error");
-    int acne = 0, clean = 0;
+           cmean = col(c, "mean_signed_error"), cworst = col(c, "worst_signed_error");
+    int acne = 0, clean = 0, leak = 0;
     for (size_t r = 1; r < c->nrows; r++) {
         if (num(c, r, cref))
             continue;
-        if (!strcmp(c->row[r][csc], "thin-coincident") && num(c, r, coff) == 0) {
-            cr_expect_lt(num(c, r, cmean), -0.05, "%s at offset 0: %g", c->row[r][cam], num(c, r, cmean));
-            acne++;
+        if (!strcmp(c->row[r][csc], "thin-coincident") && num(c, r, coff) == 0)
+            for (size_t q = 1; q < c->nrows; q++)
+                if (!strcmp(c->row[q][csc], "thin-coincident") && num(c, q, coff) == 1e-5 &&
+                    !strcmp(c->row[q][cam], c->row[r][cam]) && !num(c, q, cref)) {
+                    cr_expect_lt(fabs(num(c, r, cmean) - num(c, q, cmean)), 0.005, "%s at offset 0: %g, at 1e-5: %g",
+                                 c->row[r][cam], num(c, r, cmean), num(c, q, cmean));
+                    acne++;
+                }
+        if (!strcmp(c->row[r][csc], "thin-coincident") && num(c, r, coff) == 1e-2 &&
+            !strcmp(c->row[r][cam], "pathtrace")) {
+            cr_expect_lt(num(c, r, cworst), -0.2, "pathtrace at offset 1e-2: worst %g", num(c, r, cworst));
+            leak++;
         }
         if (!strcmp(c->row[r][csc], "thin-separated") &&
             (!strcmp(c->row[r][cam], "pathtrace") || !strcmp(c->row[r][cam], "gauss-seidel"))) {
@@ -284,6 +297,7 @@ Test(stability, quick_atlas, .timeout = 240)
         }
     }
     cr_expect_eq(acne, 4);
+    cr_expect_eq(leak, 1);
     cr_expect_eq(clean, 2);
     csv_free(c);
 

@@ -27,6 +27,8 @@ typedef struct rp_ff_elem {
     double area;
     double radius;    /* largest distance from c to a corner */
     rp_vec3 lo, hi;   /* bounding box */
+    double tol;       /* plane-side tolerance (rp_ff_tol); a pair is judged
+                         with the sum of its two */
 } rp_ff_elem;
 
 /* One adaptive-quadrature region: a rectangle [u0,u1] x [v0,v1] of the unit
@@ -56,7 +58,6 @@ struct rp_ff_context {
      * else 1 + V * 65520 (NULL when the mesh is too large to keep it);
      * 65520 = 2^4 3^2 5 7 13 keeps k/4, k/9 and k/16 exact. */
     _Atomic uint16_t *vcache;
-    double eps;              /* plane-side tolerance, scaled to the scene */
     double tol_rel, tol_abs; /* analytic: error goal per pair */
     /* Visibility culling per pair of scene faces (NULL: not computed, every
      * pair casts rays): blk[blk_start[ab] .. + blk_count[ab]], ab =
@@ -68,6 +69,7 @@ struct rp_ff_context {
     uint32_t *blk_count;
     uint32_t *blk;
     rp_vec3 *face_lo, *face_hi;  /* face bounding boxes */
+    double *face_tol;            /* face plane-side tolerances (rp_ff_tol) */
     /* Hemicube: exact delta form factors of the top face (res x res) and of
      * one side face (res x res/2, row 0 at the horizon). */
     unsigned res;

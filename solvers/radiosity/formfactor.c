@@ -69,6 +69,7 @@
  * does not depend on the thread that computes it. */
 #include "ff_internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -93,7 +94,7 @@
 #define RP_FF_MAX_BLK_LIST 48
 /* Largest mesh with a shared visibility cache (2 bytes per pair). */
 #define RP_FF_MAX_VCACHE 8192
-/* Plane-side tolerance relative to the scene diagonal. */
+/* Plane-side tolerance relative to a polygon's own size (rp_ff_tol). */
 #define RP_FF_EPS_REL 1e-9
 
 /* ---- random numbers ----------------------------------------------------- */
@@ -248,6 +249,28 @@ static rp_vec3 ff_vmax(rp_vec3 a, rp_vec3 b)
     return rp_v3(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z));
 }
 
+/* The plane-side tolerance of a polygon with bounding box lo..hi whose
+ * corners lie up to twist off its plane: 1e-9 of its own size plus the
+ * double rounding of its coordinates' magnitudes, never the scene's size. */
+static double ff_tol(rp_vec3 lo, rp_vec3 hi, double twist)
+{
+    double m = fmax(fmax(fmax(fabs(lo.x), fabs(hi.x)), fmax(fabs(lo.y), fabs(hi.y))),
+                    fmax(fabs(lo.z), fabs(hi.z)));
+    return RP_FF_EPS_REL * rp_v3_length(rp_v3_sub(hi, lo)) + 64 * DBL_EPSILON * m + twist;
+}
+
+/* How far the corners of scene face f lie off its plane (quads are planar
+ * only to 1e-6 of their diagonal, scene.c). */
+static double ff_face_twist(const rp_scene *scene, uint32_t f)
+{
+    const rp_face *fc = &rp_scene_faces(scene)[f];
+    const rp_vec3 *V = rp_scene_vertices(scene);
+    double d = rp_v3_dot(fc->normal, V[fc->v[0]]), t = 0;
+    for (uint32_t k = 1; k < fc->nverts; k++)
+        t = fmax(t, fabs(rp_v3_dot(fc->normal, V[fc->v[k]]) - d));
+    return t;
+}
+
 /* Could polygon K (plane nk.x = dk, box klo..khi) block a segment from
  * polygon A to polygon B (each with its plane)?  Conservative: 1 unless one
  * of the separating tests in the header comment proves it cannot. */
@@ -289,6 +312,7 @@ void rp_ff_context_destroy(rp_ff_context *ctx)
     free(ctx->blk);
     free(ctx->face_lo);
     free(ctx->face_hi);
+    free(ctx->face_tol);
     free(ctx->dff_top);
     free(ctx->dff_side);
     free(ctx);
@@ -315,11 +339,12 @@ static rp_status ff_build_blockers(rp_ff_context *ctx, rp_error *err)
     const rp_face *faces = rp_scene_faces(scene);
     ctx->face_lo = malloc(nf * sizeof *ctx->face_lo);
     ctx->face_hi = malloc(nf * sizeof *ctx->face_hi);
+    ctx->face_tol = malloc(nf * sizeof *ctx->face_tol);
     double *fd = malloc(nf * sizeof *fd);
     rp_vec3 *fv = malloc(nf * 4 * sizeof *fv);
     ctx->blk_start = malloc(nf * nf * sizeof *ctx->blk_start);
     ctx->blk_count = malloc(nf * nf * sizeof *ctx->blk_count);
-    if (!ctx->face_lo || !ctx->face_hi || !fd || !fv || !ctx->blk_start || !ctx->blk_count) {
+    if (!ctx->face_lo || !ctx->face_hi || !ctx->face_tol || !fd || !fv || !ctx->blk_start || !ctx->blk_count) {
         free(fd);
         free(fv);
         return rp_error_set(err, RP_ERR_NOMEM, "formfactor: out of memory for %zu faces", nf);
@@ -333,6 +358,7 @@ static rp_status ff_build_blockers(rp_ff_context *ctx, rp_error *err)
         }
         ctx->face_lo[f] = lo;
         ctx->face_hi[f] = hi;
+        ctx->face_tol[f] = ff_tol(lo, hi, ff_face_twist(scene, (uint32_t)f));
         fd[f] = rp_v3_dot(faces[f].normal, fv[4 * f]);
     }
     /* Two passes: count, then fill. */
@@ -359,7 +385,8 @@ static rp_status ff_build_blockers(rp_ff_context *ctx, rp_error *err)
                     if (!ff_can_block(&fv[4 * k], faces[k].nverts, faces[k].normal, fd[k],
                                       ctx->face_lo[k], ctx->face_hi[k], &fv[4 * a], faces[a].nverts,
                                       faces[a].normal, fd[a], &fv[4 * b], faces[b].nverts,
-                                      faces[b].normal, fd[b], lo, hi, ctx->eps))
+                                      faces[b].normal, fd[b], lo, hi,
+                                      ctx->face_tol[a] + ctx->face_tol[b] + ctx->face_tol[k]))
                         continue;
                     if (pass == 1 && ctx->blk_count[ab] != RP_FF_BLK_ALL)
                         ctx->blk[at + cnt] = (uint32_t)k;
@@ -485,8 +512,6 @@ rp_status rp_ff_context_create(const rp_scene *scene, const rp_mesh *mesh, const
     ctx->mesh = mesh;
     ctx->rc = rc;
     ctx->p = p;
-    double diag = rp_scene_diagonal(scene);
-    ctx->eps = RP_FF_EPS_REL * (isfinite(diag) && diag > 0 ? diag : 1.0);
     ctx->tol_rel = p.tolerance;
     ctx->tol_abs = RP_FF_TOL_ABS;
 
@@ -515,6 +540,7 @@ rp_status rp_ff_context_create(const rp_scene *scene, const rp_mesh *mesh, const
             el->hi = k ? ff_vmax(el->hi, el->v[k]) : el->v[k];
         }
         el->d = rp_v3_dot(el->n, el->c);
+        el->tol = ff_tol(el->lo, el->hi, ff_face_twist(scene, el->face));
     }
 
     rp_status st = ff_build_edges(ctx, err);
@@ -846,7 +872,7 @@ static double ff_analytic_unoccluded(const rp_ff_context *ctx, rp_ff_scratch *s,
                                      uint32_t j)
 {
     const rp_ff_elem *ei = &ctx->el[i], *ej = &ctx->el[j];
-    double eps = ctx->eps;
+    double eps = ei->tol + ej->tol;
     double lo, hi;
     rp_vec3 src[RP_FF_MAXV], dom[RP_FF_MAXV];
     uint32_t nsrc = ej->nv, ndom = ei->nv;
@@ -956,13 +982,14 @@ static int ff_needs_rays(const rp_ff_context *ctx, uint32_t i, uint32_t j)
     const uint32_t *list = &ctx->blk[ctx->blk_start[ab]];
     for (uint32_t t = 0; t < cnt; t++) {
         uint32_t f = list[t];
-        if (!ff_boxes_meet(ctx->face_lo[f], ctx->face_hi[f], lo, hi, ctx->eps))
+        const double tol = ctx->face_tol[f] + ei->tol + ej->tol;
+        if (!ff_boxes_meet(ctx->face_lo[f], ctx->face_hi[f], lo, hi, tol))
             continue;
         rp_vec3 fv[4];
         uint32_t m = ff_face_verts(ctx->scene, f, fv);
         if (ff_can_block(fv, m, faces[f].normal, rp_v3_dot(faces[f].normal, fv[0]), ctx->face_lo[f],
                          ctx->face_hi[f], ei->v, ei->nv, ei->n, ei->d, ej->v, ej->nv, ej->n, ej->d,
-                         lo, hi, ctx->eps))
+                         lo, hi, tol))
             return 1;
     }
     return 0;
@@ -1077,10 +1104,10 @@ static double ff_montecarlo(const rp_ff_context *ctx, uint32_t i, uint32_t j, do
         *se = 0;
     double lo, hi;
     ff_side(ej->v, ej->nv, ei->n, ei->d, &lo, &hi);
-    if (hi <= ctx->eps)
+    if (hi <= ei->tol + ej->tol)
         return 0;
     ff_side(ei->v, ei->nv, ej->n, ej->d, &lo, &hi);
-    if (hi <= ctx->eps)
+    if (hi <= ei->tol + ej->tol)
         return 0;
     int vis = ff_needs_rays(ctx, i, j);
     /* Samples keyed on the unordered pair, x always on the lower-numbered

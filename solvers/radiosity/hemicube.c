@@ -140,7 +140,6 @@ void rp_ff_hemicube_row(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i)
     const rp_ff_elem *ei = &ctx->el[i];
     rp_vec3 t, b, n = ei->n, c = ei->c;
     rp_v3_basis(n, &t, &b);
-    double eps = ctx->eps;
     rp_vec3 *L = s->poly, *Q = s->poly + RP_HC_MAXV, *T1 = s->poly + 2 * RP_HC_MAXV,
             *T2 = s->poly + 3 * RP_HC_MAXV;
 
@@ -148,6 +147,7 @@ void rp_ff_hemicube_row(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i)
         if (j == i)
             continue;
         const rp_ff_elem *ej = &ctx->el[j];
+        const double eps = ei->tol + ej->tol; /* plane-side tolerance of the pair */
         double hi = -INFINITY;
         for (uint32_t k = 0; k < ej->nv; k++)
             hi = fmax(hi, rp_v3_dot(n, ej->v[k]) - ei->d);

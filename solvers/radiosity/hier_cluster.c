@@ -215,7 +215,7 @@ static uint32_t build(hier_state *s, uint32_t *idx, sort_key *tmp, uint32_t lo, 
     k->pd = f0->d;
     for (uint32_t i = lo + 1; i < hi && k->planar; i++) {
         const hier_face *f = &s->faces[idx[i]];
-        k->planar = rp_v3_dot(f->n, f0->n) >= 1 - 1e-12 && fabs(f->d - f0->d) <= s->eps;
+        k->planar = rp_v3_dot(f->n, f0->n) >= 1 - 1e-12 && fabs(f->d - f0->d) <= f->tol + f0->tol;
     }
     if (k->planar)
         k->axis = f0->n;
@@ -328,21 +328,23 @@ static double cone_cos_bound(rp_vec3 a, double ca, double sa, rp_vec3 u, double 
 static int item_behind(const hier_state *s, uint32_t it, rp_vec3 lo, rp_vec3 hi)
 {
     rp_vec3 n;
-    double d;
+    double d, tol;
     if (is_node(it)) {
         const hier_face *f = &s->faces[s->nodes[it].face];
         n = f->n;
         d = f->d;
+        tol = f->tol;
     } else {
         const hier_cluster *k = cl_of(s, it);
         if (!k->planar)
             return 0;
         n = k->axis;
         d = k->pd;
+        tol = hier_box_tol(k->lo, k->hi);
     }
     /* The box corner farthest in front of the plane. */
     rp_vec3 c = rp_v3(n.x > 0 ? hi.x : lo.x, n.y > 0 ? hi.y : lo.y, n.z > 0 ? hi.z : lo.z);
-    return rp_v3_dot(n, c) - d <= s->eps;
+    return rp_v3_dot(n, c) - d <= tol + hier_box_tol(lo, hi);
 }
 
 /* -1: nothing can pass (drop); 0: the spheres overlap (split); 1: apart,

@@ -5,6 +5,8 @@
 #ifndef RP_HIER_INTERNAL_H
 #define RP_HIER_INTERNAL_H
 
+#include <float.h>
+#include <math.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -39,6 +41,10 @@ typedef struct hier_node {
     uint32_t child;    /* first of four children, RP_NONE for a leaf */
     uint16_t nverts;   /* 3 or 4 */
     uint16_t depth;    /* 0 for roots */
+    uint64_t id;       /* names the node by its face and place in the tree,
+                          not its index (which shifts when a face is added
+                          anywhere): the key of its random draws, so a black
+                          ground plane added to a scene changes none */
 } hier_node;
 
 enum {
@@ -70,6 +76,10 @@ typedef struct hier_face {
     const double *Le;
     uint32_t surface;
     int reflects;       /* some band of rho is > 0 */
+    int lit;            /* reflects, or emits in some band */
+    double tol;         /* plane tolerance: hier_box_tol of its box plus its
+                           non-planarity; a pair of faces is judged with
+                           the sum of their two */
 } hier_face;
 
 /* A cluster (Smits, Arvo & Greenberg 1994): a node of a binary bounding-
@@ -124,11 +134,13 @@ typedef struct hier_state {
     void *log_ctx;
     uint64_t seed;
     rp_raycast *rc;
-    double eps;          /* plane tolerance, scene units */
 
     hier_face *faces;    /* nfaces */
     double e_norm[HIER_MAX_BANDS]; /* sum over faces of A E per band */
-    double total_area;
+    double lit_area;     /* area of the faces that reflect or emit in some
+                            band: the scale of --min-area, --cluster-area and
+                            the oracle (black faces, however large, change
+                            none of them) */
 
     hier_node *nodes;
     size_t nnodes, cap_nodes;
@@ -299,6 +311,16 @@ size_t hier_vertices_count(const hier_vertices *v);
 /* fmax and fmin without the library call (no NaNs reach them). */
 static inline double hier_max(double a, double b) { return a > b ? a : b; }
 static inline double hier_min(double a, double b) { return a < b ? a : b; }
+
+/* A plane-side tolerance for geometry within the box [lo, hi]: 1e-9 of the
+ * box's own diagonal plus the double rounding of its coordinates'
+ * magnitudes, never the scene's size. */
+static inline double hier_box_tol(rp_vec3 lo, rp_vec3 hi)
+{
+    double m = hier_max(hier_max(fabs(lo.x), fabs(hi.x)), hier_max(hier_max(fabs(lo.y), fabs(hi.y)),
+                                                                  hier_max(fabs(lo.z), fabs(hi.z))));
+    return 1e-9 * rp_v3_length(rp_v3_sub(hi, lo)) + 64 * DBL_EPSILON * m;
+}
 
 /* Counter-based random numbers (a pure function of the key and the
  * dimension), so results do not depend on the thread schedule:

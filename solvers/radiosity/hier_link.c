@@ -60,12 +60,13 @@ static rp_vec3 vmin(rp_vec3 a, rp_vec3 b) { return rp_v3(hier_min(a.x, b.x), hie
 static rp_vec3 vmax(rp_vec3 a, rp_vec3 b) { return rp_v3(hier_max(a.x, b.x), hier_max(a.y, b.y), hier_max(a.z, b.z)); }
 
 /* 1 if some corner of node nd lies strictly on side `side` (+1 front, -1
- * behind) of face f's plane. */
+ * behind) of face f's plane (beyond the two faces' tolerances). */
 static int face_side(const hier_state *s, const hier_node *nd, uint32_t f, int side)
 {
     const hier_face *hf = &s->faces[f];
+    const double tol = hf->tol + s->faces[nd->face].tol;
     for (int i = 0; i < nd->nverts; i++)
-        if (side * (rp_v3_dot(hf->n, nd->v[i]) - hf->d) > s->eps)
+        if (side * (rp_v3_dot(hf->n, nd->v[i]) - hf->d) > tol)
             return 1;
     return 0;
 }
@@ -102,7 +103,8 @@ rp_status hier_cull_init(hier_state *s, rp_error *err)
             size_t off = s->ncand;
             for (size_t k = 0; k < n; k++) {
                 if (k == i || k == j || !front[k * n + i] || !front[k * n + j] ||
-                    !box_overlap(s->faces[k].lo, s->faces[k].hi, lo, hi, s->eps) ||
+                    !box_overlap(s->faces[k].lo, s->faces[k].hi, lo, hi,
+                                 s->faces[k].tol + s->faces[i].tol + s->faces[j].tol) ||
                     !(front[i * n + k] || front[j * n + k]) || !(behind[i * n + k] || behind[j * n + k]))
                     continue;
                 if (s->ncand == cap) {
@@ -144,8 +146,9 @@ static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_nod
         hi = vmax(hi, p->v[i]);
     }
     const uint32_t *c = s->cand + s->pair_off[at];
+    const double tol = s->faces[q->face].tol + s->faces[p->face].tol;
     for (uint32_t k = 0; k < cnt; k++) {
-        if (!box_overlap(s->faces[c[k]].lo, s->faces[c[k]].hi, lo, hi, s->eps))
+        if (!box_overlap(s->faces[c[k]].lo, s->faces[c[k]].hi, lo, hi, tol + s->faces[c[k]].tol))
             continue;
         /* Both elements on one side of the candidate's plane: the segments
          * between them cannot cross it. */
@@ -188,6 +191,10 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
     const hier_face *fq = &s->faces[q->face], *fp = &s->faces[p->face];
     if (!fq->reflects)
         return 0; /* a black receiver (a pure emitter) gathers nothing */
+    if (!fp->lit)
+        return 0; /* a black source (a ground plane) gives nothing: a link
+                     from it would only mark its receiver as seen (the
+                     pull's weights, hierarchical.c) */
     double pmax = -INFINITY, pmin = INFINITY, qmax = -INFINITY, qmin = INFINITY;
     for (int i = 0; i < p->nverts; i++) {
         double d = rp_v3_dot(fq->n, p->v[i]) - fq->d;
@@ -200,9 +207,10 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
         qmin = hier_min(qmin, d);
     }
     /* Faces facing away: no link. */
-    if (pmax <= s->eps || qmax <= s->eps)
+    const double tol = fq->tol + fp->tol;
+    if (pmax <= tol || qmax <= tol)
         return 0;
-    int straddle = pmin < -s->eps || qmin < -s->eps;
+    int straddle = pmin < -tol || qmin < -tol;
     double F, Fmax, Fvar = 0;
     const int emitter = !fp->reflects;
     rp_vec3 dc = rp_v3_sub(p->c, q->c);
@@ -257,7 +265,7 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
          * count. */
         flags |= HIER_LINK_TESTED;
         unsigned m = (unsigned)floor(sqrt((double)s->vis_rays) + 0.5), N = m * m;
-        uint64_t key = hier_key(s->seed, qi, pi);
+        uint64_t key = hier_key(s->seed, q->id, p->id);
         uint32_t perm[64];
         hier_shuffle(perm, N, key, 4 * (uint64_t)N);
         unsigned valid = 0, open = 0;

@@ -86,6 +86,7 @@ rp_status hier_nodes_init(hier_state *s, rp_error *err)
             nd->v[3] = nd->v[2];
         node_measure(nd);
         nd->face = (uint32_t)f;
+        nd->id = f;
         nd->parent = RP_NONE;
         nd->child = RP_NONE;
         const double *Le = s->faces[f].Le;
@@ -164,6 +165,7 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err)
         c->parent = i;
         c->child = RP_NONE;
         c->depth = (uint16_t)(p->depth + 1);
+        c->id = hier_mix(p->id + (uint64_t)(k + 1) * UINT64_C(0x9e3779b97f4a7c15));
         node_measure(c);
         size_t ci = (size_t)first + (size_t)k;
         for (size_t b = 0; b < nb; b++) {

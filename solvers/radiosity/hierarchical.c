@@ -50,12 +50,12 @@
 
 static const rp_option_spec hier_options[] = {
     {"bf-epsilon", "EPS",
-     "refine a link while rho_receiver x B_source x F exceeds EPS x the scene's mean emitted "
-     "radiosity (BF refinement)",
+     "refine a link while rho_receiver x B_source x F exceeds EPS x the mean emitted radiosity "
+     "over the faces that reflect or emit (BF refinement)",
      HIER_DEFAULT_BF},
     {"min-area", "FRAC",
-     "smallest element area, as a fraction of the scene's total surface area (see also "
-     "--contact-levels)",
+     "smallest element area, as a fraction of the area of the faces that reflect or emit (black "
+     "faces, which need no elements, do not count; see also --contact-levels)",
      HIER_DEFAULT_MIN_AREA},
     {"contact-levels", "N",
      "pairs in which one element crosses the other's plane (a box standing on the floor) may be "
@@ -83,8 +83,8 @@ static const rp_option_spec hier_options[] = {
      "auto"},
     {"cluster-rays", "N", "point pairs (and visibility rays) per cluster link form factor", "16"},
     {"cluster-area", "FRAC",
-     "with clustering, links to elements and clusters smaller than FRAC x the total area are "
-     "refined by the error in power (B x F x area) rather than radiosity",
+     "with clustering, links to elements and clusters smaller than FRAC x the area of the faces "
+     "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
      "1e-3"},
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
@@ -320,38 +320,47 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory");
     const rp_face *faces = rp_scene_faces(scene);
     const rp_vec3 *vs = rp_scene_vertices(scene);
+    s->lit_area = 0;
     for (size_t f = 0; f < s->nfaces; f++) {
         hier_face *hf = &s->faces[f];
         const rp_material *m = rp_scene_face_material(scene, (uint32_t)f);
         hf->n = faces[f].normal;
         hf->d = rp_v3_dot(hf->n, vs[faces[f].v[0]]);
         hf->lo = hf->hi = vs[faces[f].v[0]];
+        double twist = 0;
         for (uint32_t k = 1; k < faces[f].nverts; k++) {
             rp_vec3 p = vs[faces[f].v[k]];
             hf->lo = rp_v3(hier_min(hf->lo.x, p.x), hier_min(hf->lo.y, p.y), hier_min(hf->lo.z, p.z));
             hf->hi = rp_v3(hier_max(hf->hi.x, p.x), hier_max(hf->hi.y, p.y), hier_max(hf->hi.z, p.z));
+            twist = hier_max(twist, fabs(rp_v3_dot(hf->n, p) - hf->d));
         }
+        hf->tol = hier_box_tol(hf->lo, hf->hi) + twist;
         hf->rho = m->rho;
         hf->Le = m->Le;
         hf->surface = faces[f].surface;
         for (size_t b = 0; b < s->nb; b++) {
             hf->reflects |= m->rho[b] > 0;
+            hf->lit |= m->rho[b] > 0 || m->Le[b] > 0;
             s->e_norm[b] += faces[f].area * RP_PI * m->Le[b];
         }
+        if (hf->lit)
+            s->lit_area += faces[f].area;
     }
-    s->total_area = rp_scene_total_area(scene);
-    /* The oracle's scale: the area-weighted mean emitted radiosity of the
-     * band that emits most.  The largest emitted radiosity would judge
-     * interreflections by a small bright lamp (the Cornell box's is 150
-     * times its scene's mean) far more loosely than by a large dim one. */
+    /* The oracle's scale: the area-weighted mean emitted radiosity, over
+     * the faces that reflect or emit, of the band that emits most.  The
+     * largest emitted radiosity would judge interreflections by a small
+     * bright lamp (the Cornell box's is 150 times its scene's mean) far
+     * more loosely than by a large dim one.  Areas are those of the lit
+     * faces (lit_area) here and in --min-area and --cluster-area: a face
+     * black in every band neither gathers nor shines, so adding one (a
+     * ground plane a kilometre wide) changes no refinement. */
     double emean = 0;
     for (size_t b = 0; b < s->nb; b++)
-        emean = hier_max(emean, s->e_norm[b] / rp_scene_total_area(scene));
+        emean = hier_max(emean, s->e_norm[b] / s->lit_area);
     s->bf_eps = s->bf_rel * emean;
-    s->min_area = s->min_area_rel * s->total_area;
+    s->min_area = s->min_area_rel * s->lit_area;
     s->min_area_contact = ldexp(s->min_area, -2 * (int)s->contact_levels);
-    s->cl_area = s->cl_area_rel * s->total_area;
-    s->eps = 1e-9 * rp_scene_diagonal(scene);
+    s->cl_area = s->cl_area_rel * s->lit_area;
 
     if ((st = rp_raycast_create(scene, NULL, &s->rc, err)) != RP_OK)
         return st;
@@ -540,7 +549,7 @@ static void stats_fill(const hier_state *s, rp_hier_stats *o)
     o->links_invisible = s->links_invisible;
     o->links_refined = s->links_refined;
     o->min_leaf_area = amin;
-    o->uniform_equivalent = amin > 0 ? s->total_area / amin : 0;
+    o->uniform_equivalent = amin > 0 ? s->lit_area / amin : 0;
     o->min_area = s->min_area;
     o->bf_epsilon = s->bf_eps;
     o->iterations = s->iterations;

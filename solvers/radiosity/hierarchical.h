@@ -25,8 +25,9 @@ typedef struct rp_hier_stats {
     size_t links_invisible;   /* every ray blocked: found, counted, not stored */
     size_t links_refined;     /* links replaced by finer ones so far */
     double min_leaf_area;     /* smallest leaf, scene units squared */
-    double uniform_equivalent; /* total area / min_leaf_area: the element
-                                  count of a uniform mesh as fine */
+    double uniform_equivalent; /* lit area (faces that reflect or emit) /
+                                  min_leaf_area: the element count of a
+                                  uniform mesh as fine */
     double min_area;          /* the refinement floor in use (absolute) */
     double bf_epsilon;        /* the oracle's threshold in use (absolute, W m^-2) */
     unsigned long iterations; /* gather + push-pull sweeps */

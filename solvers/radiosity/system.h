@@ -98,7 +98,9 @@ typedef struct rp_rad_system {
 /* Option specs every classic solver takes; a method's spec array lists
  * these, then its own, then {NULL}. */
 #define RP_RAD_MESH_OPTIONS                                                                  \
-    {"elements", "N", "target element count for the whole scene (exclusive with --max-edge)", \
+    {"elements", "N",                                                                        \
+     "target element count for the whole scene: one per face black in every band, the rest " \
+     "spread over the faces that reflect or emit (exclusive with --max-edge)",               \
      "1000"},                                                                                \
     {"max-edge", "L", "target longest element edge in scene units (exclusive with --elements)", \
      NULL},                                                                                  \
