@@ -83,7 +83,7 @@ typedef struct real_result {
     double seconds[NMETHODS], peak_mb[NMETHODS], iterations[NMETHODS];
     int converged[NMETHODS], ran[NMETHODS];
     char error[NMETHODS][160];
-    char spec[NMETHODS][128];      /* the spec as run */
+    char spec[NMETHODS][256];      /* the spec as run */
     double max_rel[NMETHODS], rms_rel[NMETHODS];
     size_t fails[NMETHODS];
     double ref_seconds;
