@@ -226,6 +226,12 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err);
 /* A point on a node from (u1, u2) in [0, 1)^2, uniform in area for
  * triangles and parallelograms. */
 rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2);
+/* Area sampling of a convex polygon poly[0..m-1] (m <= 8): prepare fills
+ * cum[0..m-2] with the cumulative areas of its fan from poly[0] and
+ * returns 0 if the polygon has no area; point maps (u1, u2) in [0, 1)^2 to
+ * a point uniform in area. */
+int hier_polygon_prepare(const rp_vec3 *poly, int m, double *cum);
+rp_vec3 hier_polygon_point(const rp_vec3 *poly, int m, const double *cum, double u1, double u2);
 /* Lambert's contour integral (ground-truth.md): the form factor from a
  * differential area at x with unit normal n to polygon poly[0..m-1],
  * clipped to the half-space in front of x's tangent plane. */
