@@ -353,9 +353,9 @@ size_t hier_bytes(const hier_state *s)
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
     if (s->clustering)
-        b += s->ncl * (sizeof(hier_cluster) + (10 * s->nb + 4) * sizeof(double)) +
-             s->nfaces * (3 * sizeof(uint32_t) + (2 + s->nb) * sizeof(double)) +
-             s->cl_nn * (sizeof(double) + 1) + s->cap_clinks * sizeof(hier_clink);
+        b += s->ncl * (sizeof(hier_cluster) + 2 * s->nb * sizeof(double) + 2 * sizeof(uint32_t)) +
+             s->nfaces * (3 * sizeof(uint32_t) + sizeof(double)) + s->cl_nn * (sizeof(double) + 1) +
+             s->cap_clinks * sizeof(hier_clink) + (s->cap_cl_cent + s->cap_cl_nent) * sizeof(hier_centry);
     if (s->cull)
         b += s->nfaces * s->nfaces * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t);
     return b;
