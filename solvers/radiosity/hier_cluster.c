@@ -472,11 +472,12 @@ static double pair_kernel(rp_vec3 x, rp_vec3 nx, rp_vec3 y, rp_vec3 ny)
     return w > 0 && isfinite(w) ? w : 0;
 }
 
-/* Adds F to the entry (recv, src) among out[0..*n) (a receiving element's
- * samples often land on one source leaf), or appends it. */
+/* Adds F to the entry (recv, src, via) among the last 16 of out[0..*n)
+ * (a receiving element's samples often land on one source leaf), or
+ * appends it. */
 static void entry_add(hier_centry *out, unsigned *n, uint32_t recv, uint32_t src, uint32_t via, double F)
 {
-    for (unsigned k = 0; k < *n; k++)
+    for (unsigned k = *n > 16 ? *n - 16 : 0; k < *n; k++)
         if (out[k].src == src && out[k].recv == recv && out[k].via == via) {
             out[k].F = (float)(out[k].F + F);
             return;
@@ -550,13 +551,22 @@ static unsigned node_entries(const hier_state *s, uint32_t q, uint32_t src, hier
     return n;
 }
 
-/* Samples a face of a cluster receiver draws: --cluster-face-rays, plus
- * its share of --cluster-rays by area (a large face among small ones is
- * an element of its own size, sampled like a quadtree node). */
-static unsigned face_samples(const hier_state *s, const hier_cluster *c, uint32_t f)
+/* Most samples one face of a receiving cluster draws at one level. */
+#define FACE_MAX_SAMPLES 4096
+
+/* Samples face f of cluster receiver c draws for the cluster's nl links:
+ * --cluster-face-rays, plus, for a face larger than --cluster-area, its
+ * share by area of --cluster-rays per link, as a quadtree node receiving
+ * those links would draw.  A wall in a cluster of small faces is then
+ * sampled as finely as a node, while the small faces, whose radiosity
+ * the oracle already judges by power (sec. 4 of Smits et al. 1994), each
+ * keep a few samples. */
+static unsigned face_samples(const hier_state *s, const hier_cluster *c, uint32_t f, unsigned nl)
 {
-    double extra = floor((double)s->cluster_rays * s->nodes[f].area / c->area);
-    return s->cluster_face_rays + (unsigned)hier_min(extra, (double)s->cluster_rays);
+    double a = s->nodes[f].area;
+    double big = s->cl_area > 0 ? hier_min(1.0, a / s->cl_area) : 1.0;
+    double extra = floor((double)s->cluster_rays * nl * (a / c->area) * big);
+    return s->cluster_face_rays + (unsigned)hier_min(extra, (double)FACE_MAX_SAMPLES);
 }
 
 /* The entries of face f of cluster receiver c, whose links are
@@ -578,12 +588,14 @@ static unsigned face_samples(const hier_state *s, const hier_cluster *c, uint32_
 static unsigned face_entries(const hier_state *s, uint32_t c, uint32_t f, const hier_clink *links, const double *pdf,
                              const double *cdf, unsigned nl, hier_centry *out, double *rays)
 {
-    const unsigned K = face_samples(s, &s->cl[c], f);
+    const unsigned K = face_samples(s, &s->cl[c], f, nl);
     const hier_node *nd = &s->nodes[f];
     rp_vec3 nf = s->faces[f].n;
     uint64_t key = hier_key(s->seed ^ CE_SEED, c, f);
-    uint32_t perm[512];
-    hier_shuffle(perm, K, key, 8 * (uint64_t)K);
+    /* The points on the face follow a golden-ratio sequence in their
+     * first coordinate (well spread for any K, and not in step with the
+     * strata of the link choice). */
+    const double x0 = hier_u01(key, 8 * (uint64_t)K);
     unsigned n = 0;
     for (unsigned j = 0; j < K; j++) {
         double u = (j + hier_u01(key, 8 * (uint64_t)j)) / K;
@@ -598,8 +610,8 @@ static unsigned face_entries(const hier_state *s, uint32_t c, uint32_t f, const 
         if (!(pdf[lo] > 0))
             continue;
         uint32_t src = links[lo].src, fb;
-        rp_vec3 x = hier_node_point(nd, (perm[j] + hier_u01(key, 8 * (uint64_t)j + 1)) / K,
-                                    hier_u01(key, 8 * (uint64_t)j + 2));
+        double ux = x0 + 0.6180339887498949 * j;
+        rp_vec3 x = hier_node_point(nd, ux - floor(ux), hier_u01(key, 8 * (uint64_t)j + 2));
         rp_vec3 y = item_point(s, src, hier_u01(key, 8 * (uint64_t)j + 3), hier_u01(key, 8 * (uint64_t)j + 4),
                                hier_u01(key, 8 * (uint64_t)j + 5), &fb);
         rp_vec3 ny = s->faces[fb].n;
@@ -671,27 +683,22 @@ static rp_status cluster_sums(hier_state *s, rp_error *err)
     const hier_centry *pools[2] = {s->cl_nent, s->cl_cent};
     const size_t counts[2] = {s->ncl_nent, s->ncl_cent};
     for (int p = 0; p < 2; p++)
-        for (size_t k = 0; k < counts[p]; k++) {
-            s->cl_nff[pools[p][k].recv] += pools[p][k].F;
-            s->cl_nreach[pools[p][k].recv] = 1;
-        }
+        for (size_t k = 0; k < counts[p]; k++)
+            if (pools[p][k].F != 0) {
+                s->cl_nff[pools[p][k].recv] += pools[p][k].F;
+                s->cl_nreach[pools[p][k].recv] = 1;
+            }
     return RP_OK;
 }
 
-/* Entries of cluster c kept from the old pool: all of them, or (when c
- * lost links and gained none) all but those drawn for the links it lost,
- * rm[0..nrm) (cluster << 32 | source, sorted).  What is left is still
- * unbiased for the links that stay: each link's entries estimate its own
- * transfer. */
-static size_t keep_entries(const hier_state *s, size_t c, int pruned, const uint64_t *rm, size_t nrm,
-                           hier_centry *out)
+/* Cluster c lost links and gained none: the entries drawn for the links
+ * it lost, rm[0..nrm) (cluster << 32 | source, sorted), die (F = 0, left
+ * for compact_pool).  What is left is still unbiased for the links that
+ * stay: each link's entries estimate its own transfer. */
+static void prune_entries(hier_state *s, size_t c, const uint64_t *rm, size_t nrm)
 {
-    const hier_centry *e = s->cl_cent + s->cl_efirst[c];
+    hier_centry *e = s->cl_cent + s->cl_efirst[c];
     size_t n = s->cl_ecount[c];
-    if (!pruned) {
-        memcpy(out, e, n * sizeof *out);
-        return n;
-    }
     size_t lo = 0, hi = nrm;
     while (lo < hi) {
         size_t m = (lo + hi) / 2;
@@ -702,8 +709,9 @@ static size_t keep_entries(const hier_state *s, size_t c, int pruned, const uint
     }
     for (hi = lo; hi < nrm && (rm[hi] >> 32) == c; hi++)
         ;
-    size_t at = 0;
     for (size_t k = 0; k < n; k++) {
+        if (e[k].F == 0)
+            continue;
         uint64_t want = ((uint64_t)c << 32) | e[k].via;
         size_t x = lo, y = hi;
         while (x < y) {
@@ -713,10 +721,113 @@ static size_t keep_entries(const hier_state *s, size_t c, int pruned, const uint
             else
                 y = m;
         }
-        if (!(x < hi && rm[x] == want))
-            out[at++] = e[k];
+        if (x < hi && rm[x] == want) {
+            e[k].F = 0;
+            s->ncl_cdead++;
+        }
     }
-    return at;
+}
+
+/* Kills entries e[0..n) (their link or cluster drew new ones). */
+static size_t kill_entries(hier_centry *e, size_t n)
+{
+    size_t d = 0;
+    for (size_t k = 0; k < n; k++)
+        if (e[k].F != 0) {
+            e[k].F = 0;
+            d++;
+        }
+    return d;
+}
+
+/* Appends n entries to a pool (*pool, *np used, *cap). */
+static int pool_append(hier_centry **pool, size_t *np, size_t *cap, const hier_centry *e, size_t n)
+{
+    if (*np + n > UINT32_MAX || !hier_grow((void **)pool, cap, *np + n + 1, sizeof **pool))
+        return 0;
+    memcpy(*pool + *np, e, n * sizeof **pool);
+    *np += n;
+    return 1;
+}
+
+/* Gives a pool's unused storage back beyond a quarter of what it holds. */
+static void pool_trim(hier_centry **pool, size_t n, size_t *cap)
+{
+    size_t want = n + n / 4 + 1024;
+    if (*cap <= want)
+        return;
+    hier_centry *p = realloc(*pool, want * sizeof *p);
+    if (p) {
+        *pool = p;
+        *cap = want;
+    }
+}
+
+/* Pools hold dead entries (F = 0) where links went or clusters drew
+ * again; once they are a quarter of a pool, it is compacted in place (in
+ * link order for the node pool, start order for the cluster pool) and
+ * its storage trimmed. */
+static void compact_pools(hier_state *s, hier_clink *links, size_t nl)
+{
+    if (4 * s->ncl_ndead > s->ncl_nent) {
+        size_t at = 0;
+        for (size_t k = 0; k < nl; k++) {
+            hier_clink *l = &links[k];
+            if (!is_node(l->recv))
+                continue;
+            uint32_t f = l->first, c = l->count, n = 0;
+            for (uint32_t j = 0; j < c; j++)
+                if (s->cl_nent[f + j].F != 0)
+                    s->cl_nent[at + n++] = s->cl_nent[f + j];
+            l->first = (uint32_t)at;
+            l->count = n;
+            at += n;
+        }
+        s->ncl_nent = at;
+        s->ncl_ndead = 0;
+        pool_trim(&s->cl_nent, s->ncl_nent, &s->cap_cl_nent);
+    }
+    if (4 * s->ncl_cdead > s->ncl_cent) {
+        /* Clusters' ranges are not in pool order once some drew again:
+         * order them by their start, then move down. */
+        size_t at = 0;
+        uint32_t *ord = malloc((s->ncl ? s->ncl : 1) * sizeof *ord);
+        if (!ord)
+            return; /* compacted another time */
+        size_t no = 0;
+        for (size_t c = 0; c < s->ncl; c++)
+            if (s->cl_ecount[c])
+                ord[no++] = (uint32_t)c;
+        /* A counting pass over the pool marks each live range's owner:
+         * ranges do not overlap, so sorting by start is a bucket fill. */
+        uint32_t *owner = malloc((s->ncl_cent ? s->ncl_cent : 1) * sizeof *owner);
+        if (!owner) {
+            free(ord);
+            return;
+        }
+        for (size_t k = 0; k < s->ncl_cent; k++)
+            owner[k] = RP_NONE;
+        for (size_t i = 0; i < no; i++)
+            owner[s->cl_efirst[ord[i]]] = ord[i];
+        for (size_t k = 0; k < s->ncl_cent; k++) {
+            uint32_t c = owner[k];
+            if (c == RP_NONE)
+                continue;
+            uint32_t f = s->cl_efirst[c], n = s->cl_ecount[c], m = 0;
+            for (uint32_t j = 0; j < n; j++)
+                if (s->cl_cent[f + j].F != 0)
+                    s->cl_cent[at + m++] = s->cl_cent[f + j];
+            s->cl_efirst[c] = (uint32_t)at;
+            s->cl_ecount[c] = m;
+            at += m;
+            k = (size_t)f + n - 1;
+        }
+        free(owner);
+        free(ord);
+        s->ncl_cent = at;
+        s->ncl_cdead = 0;
+        pool_trim(&s->cl_cent, s->ncl_cent, &s->cap_cl_cent);
+    }
 }
 
 /* Scratch is bounded: new work is done in chunks of about this many
@@ -724,93 +835,74 @@ static size_t keep_entries(const hier_state *s, size_t c, int pruned, const uint
 #define EVAL_CHUNK 32768
 
 /* Evaluates the links refinement kept: the new ones get their unoccluded
- * estimate, those received by nodes their entries, and the entries of
- * every cluster that gained links are drawn again.  The entry pools are
- * rebuilt in link order (node pool) and cluster order (cluster pool),
- * the new entries computed in parallel a chunk at a time. */
-static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned char *dirty, int removed_node,
-                          const uint64_t *rm, size_t nrm, rp_error *err)
+ * estimate, those received by nodes their entries, and every cluster
+ * that gained links draws its faces' entries again (its old ones die);
+ * one that only lost links loses their entries.  New entries are
+ * computed in parallel a chunk at a time and appended to the pools. */
+static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned char *dirty, const uint64_t *rm,
+                          size_t nrm, rp_error *err)
 {
     rp_status st = RP_OK;
     const unsigned N = s->cluster_rays;
-    hier_centry *tmp = NULL, *pool = NULL;
-    size_t captmp = 0, cappool = 0, npool = 0;
-    uint32_t *cnt = NULL, *lstart = NULL, *tasks = NULL, *fill = NULL;
-    size_t capcnt = 0, captask = 0;
+    hier_centry *tmp = NULL;
+    size_t captmp = 0;
+    uint32_t *cnt = NULL, *lstart = NULL, *tasks = NULL, *fill = NULL, *idx = NULL;
+    size_t capcnt = 0, captask = 0, capidx = 0;
     size_t *toff = NULL;
     size_t captoff = 0;
     hier_clink *byc = NULL;
     double *pdf = NULL, *cdf = NULL;
     double rays = 0;
-    int new_node = 0;
     /* New links received by clusters: their unoccluded estimates. */
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) if (nl > 1024)
     for (long k = 0; k < (long)nl; k++)
         if (links[k].Fu < 0 && !is_node(links[k].recv))
             links[k].Fu = (float)link_unoccluded(s, links[k].recv, links[k].src);
-    for (size_t k = 0; k < nl; k++)
-        if (links[k].count == RP_NONE) {
-            if (is_node(links[k].recv))
-                new_node = 1;
-            else
-                dirty[links[k].recv & ~HIER_CL_BIT] |= 2;
-            links[k].count = 0;
-            if (!is_node(links[k].recv))
-                links[k].first = 0;
-        }
-    /* The node pool: the kept links received by nodes in order, old
-     * entries copied, new ones (Fu < 0) drawn a chunk at a time. */
-    if (new_node || removed_node) {
-        for (size_t k0 = 0; k0 < nl;) {
-            size_t k1 = k0, nnew = 0;
-            while (k1 < nl && nnew < EVAL_CHUNK) {
-                if (is_node(links[k1].recv) && links[k1].Fu < 0)
-                    links[k1].first = (uint32_t)nnew++;
-                k1++;
-            }
-            if (!hier_grow((void **)&tmp, &captmp, nnew * N + 1, sizeof *tmp) ||
-                !hier_grow((void **)&cnt, &capcnt, nnew + 1, sizeof *cnt))
-                goto nomem;
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (nnew > 64)
-            for (long k = (long)k0; k < (long)k1; k++) {
-                hier_clink *l = &links[k];
-                if (is_node(l->recv) && l->Fu < 0)
-                    cnt[l->first] = node_entries(s, l->recv, l->src, tmp + (size_t)l->first * N, &rays);
-            }
-            s->form_factors += (double)nnew;
-            for (size_t k = k0; k < k1; k++) {
-                hier_clink *l = &links[k];
-                if (!is_node(l->recv))
-                    continue;
-                const hier_centry *from = s->cl_nent + l->first;
-                size_t c = l->count;
-                if (l->Fu < 0) {
-                    from = tmp + (size_t)l->first * N;
-                    c = cnt[l->first];
-                    l->Fu = 0;
-                }
-                if (npool + c > UINT32_MAX || !hier_grow((void **)&pool, &cappool, npool + c + 1, sizeof *pool))
+    /* New links received by nodes: entries, a chunk at a time. */
+    for (size_t k0 = 0; k0 < nl;) {
+        size_t nnew = 0, k1 = k0;
+        for (; k1 < nl && nnew < EVAL_CHUNK; k1++)
+            if (links[k1].count == RP_NONE && is_node(links[k1].recv)) {
+                if (!hier_grow((void **)&idx, &capidx, nnew + 1, sizeof *idx))
                     goto nomem;
-                memcpy(pool + npool, from, c * sizeof *pool);
-                l->first = (uint32_t)npool;
-                l->count = (uint32_t)c;
-                npool += c;
+                idx[nnew++] = (uint32_t)k1;
             }
-            k0 = k1;
+        if (nnew == 0)
+            break;
+        if (!hier_grow((void **)&tmp, &captmp, nnew * N + 1, sizeof *tmp) ||
+            !hier_grow((void **)&cnt, &capcnt, nnew + 1, sizeof *cnt))
+            goto nomem;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (nnew > 64)
+        for (long i = 0; i < (long)nnew; i++) {
+            const hier_clink *l = &links[idx[i]];
+            cnt[i] = node_entries(s, l->recv, l->src, tmp + (size_t)i * N, &rays);
         }
-        free(s->cl_nent);
-        s->cl_nent = pool;
-        s->ncl_nent = npool;
-        s->cap_cl_nent = cappool;
-        pool = NULL;
-        cappool = npool = 0;
+        s->form_factors += (double)nnew;
+        for (size_t i = 0; i < nnew; i++) {
+            hier_clink *l = &links[idx[i]];
+            l->first = (uint32_t)s->ncl_nent;
+            l->count = cnt[i];
+            l->Fu = 0;
+            if (!pool_append(&s->cl_nent, &s->ncl_nent, &s->cap_cl_nent, tmp + i * N, cnt[i]))
+                goto nomem;
+        }
+        k0 = k1;
     }
-    size_t ndirty = 0;
-    for (size_t c = 0; c < s->ncl; c++)
-        ndirty += dirty[c] != 0;
-    if (ndirty == 0)
+    for (size_t k = 0; k < nl; k++)
+        if (links[k].count == RP_NONE) { /* received by a cluster */
+            dirty[links[k].recv & ~HIER_CL_BIT] |= 2;
+            links[k].first = links[k].count = 0;
+        }
+    /* Clusters that only lost links lose their entries. */
+    size_t ngain = 0;
+    for (size_t c = 0; c < s->ncl; c++) {
+        if (dirty[c] == 1)
+            prune_entries(s, c, rm, nrm);
+        ngain += (dirty[c] & 2) != 0;
+    }
+    if (ngain == 0)
         goto done;
-    /* The cluster pool.  Links by receiving cluster (CSR, in link order). */
+    /* Links by receiving cluster (CSR, in link order). */
     lstart = calloc(s->ncl + 1, sizeof *lstart);
     fill = malloc((s->ncl ? s->ncl : 1) * sizeof *fill);
     if (!lstart || !fill)
@@ -839,7 +931,10 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
         while (c1 < s->ncl && ntask < EVAL_CHUNK) {
             size_t c = c1++;
             unsigned n = lstart[c + 1] - lstart[c];
-            if (!(dirty[c] & 2) || n == 0)
+            if (!(dirty[c] & 2))
+                continue;
+            s->ncl_cdead += kill_entries(s->cl_cent + s->cl_efirst[c], s->cl_ecount[c]);
+            if (n == 0)
                 continue;
             link_pdf(s, byc + lstart[c], n, pdf + lstart[c], cdf + lstart[c]);
             const hier_cluster *k = &s->cl[c];
@@ -850,7 +945,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
                 tasks[2 * ntask] = (uint32_t)c;
                 tasks[2 * ntask + 1] = s->cl_faces[i];
                 toff[ntask] = slots;
-                slots += face_samples(s, k, s->cl_faces[i]);
+                slots += face_samples(s, k, s->cl_faces[i], n);
                 ntask++;
             }
         }
@@ -866,39 +961,26 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
         s->form_factors += (double)ntask;
         size_t t = 0;
         for (size_t c = c0; c < c1; c++) {
-            size_t at0 = npool;
-            if (dirty[c] & 2) {
-                for (; t < ntask && tasks[2 * t] == c; t++) {
-                    if (npool + cnt[t] > UINT32_MAX ||
-                        !hier_grow((void **)&pool, &cappool, npool + cnt[t] + 1, sizeof *pool))
-                        goto nomem;
-                    memcpy(pool + npool, tmp + toff[t], cnt[t] * sizeof *pool);
-                    npool += cnt[t];
-                }
-            } else {
-                if (npool + s->cl_ecount[c] > UINT32_MAX ||
-                    !hier_grow((void **)&pool, &cappool, npool + s->cl_ecount[c] + 1, sizeof *pool))
+            if (!(dirty[c] & 2))
+                continue;
+            s->cl_efirst[c] = (uint32_t)s->ncl_cent;
+            for (; t < ntask && tasks[2 * t] == c; t++)
+                if (!pool_append(&s->cl_cent, &s->ncl_cent, &s->cap_cl_cent, tmp + toff[t], cnt[t]))
                     goto nomem;
-                npool += keep_entries(s, c, dirty[c] != 0, rm, nrm, pool + npool);
-            }
-            s->cl_efirst[c] = (uint32_t)at0;
-            s->cl_ecount[c] = (uint32_t)(npool - at0);
+            s->cl_ecount[c] = (uint32_t)(s->ncl_cent - s->cl_efirst[c]);
         }
         c0 = c1;
     }
-    free(s->cl_cent);
-    s->cl_cent = pool;
-    s->ncl_cent = npool;
-    s->cap_cl_cent = cappool;
-    pool = NULL;
     goto done;
 nomem:
     st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for cluster-link entries");
 done:
+    if (st == RP_OK)
+        compact_pools(s, links, nl);
     s->rays += rays;
     free(tmp);
-    free(pool);
     free(cnt);
+    free(idx);
     free(lstart);
     free(fill);
     free(tasks);
@@ -924,7 +1006,6 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     size_t nrm = 0, caprm = 0;
     size_t capw = 0, capk = 0, capc = 0, capfl = 0, capfc = 0, capa = 0, capcode = 0, capp = 0;
     size_t nw = 0, nk = 0, nfl = 0;
-    int removed_node = 0;
     dirty = calloc(s->ncl ? s->ncl : 1, 1);
     if (!dirty)
         goto nomem;
@@ -968,7 +1049,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
             if (!(l.Fu < 0)) {
                 /* A stored link goes: its receiver's entries go with it. */
                 if (is_node(l.recv))
-                    removed_node = 1;
+                    s->ncl_ndead += kill_entries(s->cl_nent + l.first, l.count);
                 else {
                     dirty[l.recv & ~HIER_CL_BIT] |= 1;
                     if (!hier_grow((void **)&rm, &caprm, nrm + 1, sizeof *rm))
@@ -1067,7 +1148,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     }
     if (nrm)
         qsort(rm, nrm, sizeof *rm, u64_cmp);
-    if (changed && (st = evaluate(s, kept, nk, dirty, removed_node, rm, nrm, err)) != RP_OK)
+    if (changed && (st = evaluate(s, kept, nk, dirty, rm, nrm, err)) != RP_OK)
         goto done;
     s->clinks = kept;
     s->cap_clinks = capk;
@@ -1110,6 +1191,8 @@ void hier_cluster_gather_nodes(hier_state *s, double *Bg)
     for (int p = 0; p < 2; p++)
         for (size_t k = 0; k < counts[p]; k++) {
             const hier_centry *e = &pools[p][k];
+            if (e->F == 0)
+                continue;
             const double *Bs = s->B + (size_t)e->src * nb, *rho = s->faces[s->nodes[e->recv].face].rho;
             double *g = Bg + (size_t)e->recv * nb;
             for (size_t b = 0; b < nb; b++)

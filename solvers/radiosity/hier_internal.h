@@ -184,9 +184,9 @@ typedef struct hier_state {
     double *cl_B;        /* ncl x nb: area-mean radiosity */
     uint32_t *cl_efirst, *cl_ecount; /* ncl: each cluster's entries in cl_cent */
     hier_centry *cl_cent; /* entries of the links clusters receive, by cluster */
-    size_t ncl_cent, cap_cl_cent;
+    size_t ncl_cent, cap_cl_cent, ncl_cdead;
     hier_centry *cl_nent; /* entries of the links quadtree nodes receive, by link */
-    size_t ncl_nent, cap_cl_nent;
+    size_t ncl_nent, cap_cl_nent, ncl_ndead; /* (dead entries have F = 0) */
     double *cl_nff;      /* per node (cl_nn of them): form factors of the
                             cluster-link entries it receives */
     unsigned char *cl_nreach; /* per node: some cluster-link entry reaches it */
