@@ -745,7 +745,8 @@ static int pool_append(hier_centry **pool, size_t *np, size_t *cap, const hier_c
 {
     if (*np + n > UINT32_MAX || !hier_grow((void **)pool, cap, *np + n + 1, sizeof **pool))
         return 0;
-    memcpy(*pool + *np, e, n * sizeof **pool);
+    if (n)
+        memcpy(*pool + *np, e, n * sizeof **pool);
     *np += n;
     return 1;
 }

@@ -712,7 +712,8 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                 orig[m++] = orig[k];
         if ((st = reserve_links(&s->links, &s->cap_links, m + nkept, err)) != RP_OK)
             goto done;
-        memcpy(s->links + m, kept, nkept * sizeof *kept);
+        if (nkept)
+            memcpy(s->links + m, kept, nkept * sizeof *kept);
         st = links_adopt(s, s->links, m + nkept, err);
     } else {
         /* An idle pass (the usual one near convergence): the sort buffer
