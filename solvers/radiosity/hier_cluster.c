@@ -46,14 +46,17 @@
  *     pairs, one ray each (node_entries).  F_qS B_S = A_S E[k V B(y)] / pi
  *     with the kernel k = cos_q+ cos_s+ / r^2; unbiased.
  *   - The links received by a cluster share the samples of its faces:
- *     each face draws --cluster-face-rays samples (more for a face large
- *     in its cluster), each a link chosen by a mixture of its unoccluded
+ *     each face draws --cluster-face-rays samples (a face larger than
+ *     --cluster-area also its share by area of --cluster-rays per link,
+ *     face_samples), each a link chosen by a mixture of its unoccluded
  *     form factor, that times its source's radiosity, and a uniform part,
  *     then a point on the face, a point on the link's source and one ray
  *     (face_entries).  With the weight 1 / P(link) the estimate of the
- *     face's own sum over links of F B is unbiased; a cluster whose links
- *     changed draws its faces' samples again, one that only lost links
- *     drops those links' entries (the rest stays unbiased).
+ *     face's own sum over links of F B is unbiased; a cluster that gained
+ *     links draws its faces' samples again, one that only lost links
+ *     drops those links' entries (the rest stays unbiased).  Candidate
+ *     links are judged before anything is sampled for them: only the
+ *     links the oracle keeps cost rays.
  *
  * So a face turned away from every source of its clusters' links, or that
  * no open segment joins to one, gathers exactly nothing through them, and
