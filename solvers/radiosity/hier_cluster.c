@@ -29,37 +29,52 @@
  * Like BF refinement the cluster links are judged again at every pass
  * with the current radiosities.
  *
- * Transfer (the isotropic approximation, Sillion 1995, sec. 3.2, in the
- * form Smits et al. 1994 use for clusters whose members are known):
+ * Transfer.  The isotropic approximation (Sillion 1995, sec. 3.2) lets a
+ * cluster source radiate its area-mean radiosity from all its faces and a
+ * cluster receiver hand what it gathers to all the faces below it.  Both
+ * halves carry light between surfaces that cannot see each other: the
+ * faces lining the inside of a closed shell, clustered with its outside,
+ * were handed a share of the light falling on the outside (a sealed
+ * cavity read 0.10 instead of 0), and a receiver that sees only the dark
+ * side of a source cluster gathered its mean.  Here a link's transfer is
+ * sampled per receiving element with that element's own orientation and
+ * visibility, as Smits et al. 1994 compute each member's transfer, and
+ * kept as entries (e, leaf, F): e gathers rho_e F B_leaf, the leaf (when
+ * drawn) under a source point that an open ray from e reached.
  *
- *   - a cluster source radiates its area-mean radiosity B_S from all its
- *     faces;
- *   - the link's form factor is the area average over the receiver of the
- *     point-to-source form factor,
- *         F_RS = A_S E[ cos_r+ cos_s+ V / (pi r^2) ],
- *     estimated by N stratified pairs of area-uniform points on the faces
- *     of R and of S (N = --cluster-rays), one visibility ray per pair with
- *     a non-zero kernel.  It is unbiased for the area-mean transfer;
- *   - a cluster receiver hands the gathered F B_S to the faces below it,
- *     each scaled by its own reflectance and by a share linear in its
- *     normal whose area mean over the receiver is 1 (orient, below).
- *     This is the approximation: the energy into the cluster is right on
- *     average, but how it is spread among faces of different orientation
- *     is only roughly right, which shows in Gouraud images as
- *     cluster-sized blotches (--reconstruct gather hides them).  The
- *     oracle keeps such links only where their transfer is below
- *     bf_epsilon (in power below cl_area).
+ *   - A link received by a quadtree node: --cluster-rays stratified point
+ *     pairs, one ray each (node_entries).  F_qS B_S = A_S E[k V B(y)] / pi
+ *     with the kernel k = cos_q+ cos_s+ / r^2; unbiased.
+ *   - The links received by a cluster share the samples of its faces:
+ *     each face draws --cluster-face-rays samples (a face larger than
+ *     --cluster-area also its share by area of --cluster-rays per link,
+ *     face_samples), each a link chosen by a mixture of its unoccluded
+ *     form factor, that times its source's radiosity, and a uniform part,
+ *     then a point on the face, a point on the link's source and one ray
+ *     (face_entries).  With the weight 1 / P(link) the estimate of the
+ *     face's own sum over links of F B is unbiased; a cluster that gained
+ *     links draws its faces' samples again, one that only lost links
+ *     drops those links' entries (the rest stays unbiased).  Candidate
+ *     links are judged before anything is sampled for them: only the
+ *     links the oracle keeps cost rays.
  *
- * Push-pull through clusters: gathered radiosity is pushed down through
- * the clusters to the face roots (cl_push, added to what hierarchical.c's
- * push hands the root's quadtree), cluster links received by quadtree
- * nodes add to the nodes' gathered radiosity, and cluster radiosities are
- * pulled up as area-weighted means of the face roots.  In an enclosure the
- * cluster links' form factors (with the same shares) join the row sums of
- * the leaves below them, so the furnace stays exact.
+ * So a face turned away from every source of its clusters' links, or that
+ * no open segment joins to one, gathers exactly nothing through them, and
+ * a closed cavity stays dark for any clustering.  The price is noise: the
+ * face-level values carry the sampling error of a few rays per face and
+ * cluster level (their area means over many faces do not).  The oracle
+ * keeps cluster links only where their transfer is below bf_epsilon (in
+ * power below cl_area).
+ *
+ * Push-pull: entries add to their receiving node's gathered radiosity
+ * (hier_cluster_gather_nodes), which the quadtree push hands to the
+ * leaves; cluster radiosities, which only the oracle uses, are the
+ * area-weighted means of the face roots.  In an enclosure the entries'
+ * form factors join the row sums of the leaves below them, so the furnace
+ * stays exact.
  *
  * Determinism: node and link order come from serial loops in a fixed
- * order; the parallel parts (judging, form factors) write only their own
+ * order; the parallel parts (judging, form factors, entries) write only their own
  * slots, and random numbers are keyed by the seed and the two items. */
 #include <math.h>
 #include <omp.h>
@@ -69,6 +84,7 @@
 #include "hier_internal.h"
 
 #define CL_SEED UINT64_C(0x6c75737465723031)
+#define CE_SEED UINT64_C(0x636c656e74727931)
 
 /* ---- items ---- */
 
@@ -236,15 +252,12 @@ rp_status hier_cluster_init(hier_state *s, rp_error *err)
     s->face_cl = malloc(n * sizeof *s->face_cl);
     s->cl_rho = calloc((n - 1) * nb, sizeof *s->cl_rho);
     s->cl_B = calloc((n - 1) * nb, sizeof *s->cl_B);
-    s->cl_G = calloc((n - 1) * nb * 4, sizeof *s->cl_G);
-    s->cl_acc = calloc((n - 1) * nb * 4, sizeof *s->cl_acc);
-    s->cl_push = calloc(n * nb, sizeof *s->cl_push);
-    s->cl_ff = calloc(n, sizeof *s->cl_ff);
-    s->cl_ffacc = calloc((n - 1) * 4, sizeof *s->cl_ffacc);
+    s->cl_efirst = calloc(n - 1, sizeof *s->cl_efirst);
+    s->cl_ecount = calloc(n - 1, sizeof *s->cl_ecount);
 
     sort_key *tmp = malloc(n * sizeof *tmp);
     if (!s->cl || !s->cl_faces || !s->cl_cum || !s->face_pos || !s->face_cl || !s->cl_rho || !s->cl_B ||
-        !s->cl_G || !s->cl_acc || !s->cl_push || !s->cl_ff || !s->cl_ffacc || !tmp) {
+        !s->cl_efirst || !s->cl_ecount || !tmp) {
         free(tmp);
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu clusters", n - 1);
     }
@@ -270,11 +283,10 @@ void hier_cluster_free(hier_state *s)
     free(s->face_cl);
     free(s->cl_rho);
     free(s->cl_B);
-    free(s->cl_G);
-    free(s->cl_acc);
-    free(s->cl_push);
-    free(s->cl_ff);
-    free(s->cl_ffacc);
+    free(s->cl_efirst);
+    free(s->cl_ecount);
+    free(s->cl_nent);
+    free(s->cl_cent);
     free(s->cl_nff);
     free(s->cl_nreach);
     free(s->clinks);
@@ -428,13 +440,14 @@ static int cl_decide(const hier_state *s, const hier_clink *l)
     return ar >= as ? 1 : 2;
 }
 
-/* A point uniform in area on the faces of item it, from u in [0, 1) (the
- * face, for a cluster) and (u2, u3) (the point); *face gets the face. */
+/* A point uniform in area on the faces of item it, from u in [0, 1)
+ * (stratified: the face of a cluster, the first coordinate of a node) and
+ * (u2, u3); *face gets the face. */
 static rp_vec3 item_point(const hier_state *s, uint32_t it, double u, double u2, double u3, uint32_t *face)
 {
     if (is_node(it)) {
         *face = s->nodes[it].face;
-        return hier_node_point(&s->nodes[it], u2, u3);
+        return hier_node_point(&s->nodes[it], u, u3);
     }
     const hier_cluster *k = cl_of(s, it);
     uint32_t first = k->first, count = k->count;
@@ -452,74 +465,213 @@ static rp_vec3 item_point(const hier_state *s, uint32_t it, double u, double u2,
     return hier_node_point(&s->nodes[*face], u2, u3);
 }
 
-/* F_RS = A_S E[cos_r+ cos_s+ V / (pi r^2)] over area-uniform point pairs
- * (stratified in the choice of face on both ends). */
-static double clink_eval(const hier_state *s, uint32_t r, uint32_t src, double *rays)
+/* ---- transfer: sampled entries ---- */
+
+/* The point-pair kernel cos_x+ cos_y+ / r^2 (times 1/r^2 for the
+ * normalisation of d): the integrand of the form factor, without pi. */
+static double pair_kernel(rp_vec3 x, rp_vec3 nx, rp_vec3 y, rp_vec3 ny)
 {
-    const unsigned N = s->cluster_rays;
+    rp_vec3 d = rp_v3_sub(y, x);
+    double r2 = rp_v3_dot(d, d);
+    double w = hier_max(rp_v3_dot(d, nx), 0) * hier_max(-rp_v3_dot(d, ny), 0) / (r2 * r2);
+    return w > 0 && isfinite(w) ? w : 0;
+}
+
+/* Adds F to the entry (recv, src, via) among the last 16 of out[0..*n)
+ * (a receiving element's samples often land on one source leaf), or
+ * appends it. */
+static void entry_add(hier_centry *out, unsigned *n, uint32_t recv, uint32_t src, uint32_t via, double F)
+{
+    for (unsigned k = *n > 16 ? *n - 16 : 0; k < *n; k++)
+        if (out[k].src == src && out[k].recv == recv && out[k].via == via) {
+            out[k].F = (float)(out[k].F + F);
+            return;
+        }
+    out[*n].recv = recv;
+    out[*n].src = src;
+    out[*n].via = via;
+    out[*n].F = (float)F;
+    (*n)++;
+}
+
+/* The leaf (now) under point y of face f: the source end of an entry, so a
+ * receiver gathers the radiosity of the part of the source its ray
+ * reached, not the mean of a cluster it sees only a part of. */
+static uint32_t leaf_at(const hier_state *s, uint32_t f, rp_vec3 y)
+{
+    double w[4];
+    return hier_locate(s, f, y, w);
+}
+
+/* Unoccluded form-factor estimate of link r <- src from N area-uniform
+ * point pairs, kernel only (no rays): how a cluster receiver shares its
+ * samples among its links. */
+static double link_unoccluded(const hier_state *s, uint32_t r, uint32_t src)
+{
+    /* A rough estimate is enough to share samples: a few pairs. */
+    const unsigned N = s->cluster_rays < 4 ? s->cluster_rays : 4;
     uint64_t key = hier_key(s->seed ^ CL_SEED, r, src);
-    uint32_t perm[256];
-    hier_shuffle(perm, N, key, 6 * (uint64_t)N);
     double sum = 0;
     for (unsigned k = 0; k < N; k++) {
         uint32_t fa, fb;
         rp_vec3 a = item_point(s, r, (k + hier_u01(key, 6 * (uint64_t)k)) / N, hier_u01(key, 6 * (uint64_t)k + 1),
                                hier_u01(key, 6 * (uint64_t)k + 2), &fa);
-        rp_vec3 b = item_point(s, src, (perm[k] + hier_u01(key, 6 * (uint64_t)k + 3)) / N,
-                               hier_u01(key, 6 * (uint64_t)k + 4), hier_u01(key, 6 * (uint64_t)k + 5), &fb);
-        if (fa == fb)
-            continue;
-        rp_vec3 na = s->faces[fa].n, nbv = s->faces[fb].n;
-        rp_vec3 ab = rp_v3_sub(b, a);
-        double r2 = rp_v3_dot(ab, ab);
-        double w = hier_max(rp_v3_dot(ab, na), 0) * hier_max(-rp_v3_dot(ab, nbv), 0) / (r2 * r2);
-        if (!(w > 0))
-            continue;
-        *rays += 1;
-        if (!rp_ray_occluded(s->rc, a, na, b, nbv))
-            sum += w;
+        rp_vec3 b = item_point(s, src, hier_u01(key, 6 * (uint64_t)k + 3), hier_u01(key, 6 * (uint64_t)k + 4),
+                               hier_u01(key, 6 * (uint64_t)k + 5), &fb);
+        sum += pair_kernel(a, s->faces[fa].n, b, s->faces[fb].n);
     }
     return item_area(s, src) * sum / (RP_PI * N);
 }
 
-/* How a cluster receiver shares a link's transfer among its faces.  The
- * isotropic approximation gives every face the same share, so faces
- * turned away from a light got as much as those facing it (blotches
- * cluster-sized in images).  Instead face f gets w0 (1 + n_f . u), u the
- * unit direction from the receiver's box centre to the source's: a
- * clamped-free "half cosine" that is linear in the normal, so what a
- * cluster gathers pushes down as a constant and a vector per band, and
- * with w0 = 1 / (1 + nbar . u), nbar the area-mean normal, its area
- * average over the receiver is 1: the energy into the cluster, and the
- * area-averaged answers, are those of the isotropic estimate.  Receivers
- * whose faces nearly all face away (1 + nbar . u < 0.1) share evenly. */
-static void orient(const hier_state *s, hier_clink *l)
+/* A link received by a quadtree node q from cluster src: N stratified
+ * pairs (x on q, y on the source's faces), one ray each where the kernel
+ * is positive; every open pair is an entry (q, leaf under y,
+ * A_S k / (pi N)), so F_qS B_S = A_S E[k V B(y)] / pi, unbiased, and a
+ * node that no open segment joins to a lit part of the source gathers
+ * exactly nothing.  Returns the entries written to out (room for N). */
+static unsigned node_entries(const hier_state *s, uint32_t q, uint32_t src, hier_centry *out, double *rays)
 {
-    rp_vec3 lr, hr, ls, hs;
-    item_box(s, l->recv, &lr, &hr);
-    item_box(s, l->src, &ls, &hs);
-    rp_vec3 d = rp_v3_sub(rp_v3_add(ls, hs), rp_v3_add(lr, hr));
-    double dl = rp_v3_length(d);
-    if (!(dl > 0))
-        return;
-    rp_vec3 u = rp_v3_scale(d, 1.0 / dl);
-    double c = 1 + rp_v3_dot(cl_of(s, l->recv)->nbar, u);
-    if (!(c >= 0.1))
-        return;
-    l->u[0] = (float)u.x;
-    l->u[1] = (float)u.y;
-    l->u[2] = (float)u.z;
-    l->w0 = (float)(1.0 / c);
+    const unsigned N = s->cluster_rays;
+    const hier_node *nd = &s->nodes[q];
+    rp_vec3 nq = s->faces[nd->face].n;
+    uint64_t key = hier_key(s->seed ^ CL_SEED, q, src);
+    uint32_t perm[256];
+    hier_shuffle(perm, N, key, 6 * (uint64_t)N);
+    const double AS = item_area(s, src);
+    unsigned n = 0;
+    for (unsigned k = 0; k < N; k++) {
+        uint32_t fb;
+        rp_vec3 a = hier_node_point(nd, (k + hier_u01(key, 6 * (uint64_t)k)) / N, hier_u01(key, 6 * (uint64_t)k + 1));
+        rp_vec3 b = item_point(s, src, (perm[k] + hier_u01(key, 6 * (uint64_t)k + 3)) / N,
+                               hier_u01(key, 6 * (uint64_t)k + 4), hier_u01(key, 6 * (uint64_t)k + 5), &fb);
+        rp_vec3 nbv = s->faces[fb].n;
+        double w = pair_kernel(a, nq, b, nbv);
+        if (!(w > 0))
+            continue;
+        *rays += 1;
+        if (rp_ray_occluded(s->rc, a, nq, b, nbv))
+            continue;
+        entry_add(out, &n, q, leaf_at(s, fb, b), src, AS * w / (RP_PI * N));
+    }
+    return n;
+}
+
+/* Most samples one face of a receiving cluster draws at one level. */
+#define FACE_MAX_SAMPLES 4096
+
+/* Samples face f of cluster receiver c draws for the cluster's nl links:
+ * --cluster-face-rays, plus, for a face larger than --cluster-area, its
+ * share by area of --cluster-rays per link, as a quadtree node receiving
+ * those links would draw.  A wall in a cluster of small faces is then
+ * sampled as finely as a node, while the small faces, whose radiosity
+ * the oracle already judges by power (sec. 4 of Smits et al. 1994), each
+ * keep a few samples. */
+static unsigned face_samples(const hier_state *s, const hier_cluster *c, uint32_t f, unsigned nl)
+{
+    double a = s->nodes[f].area;
+    double big = s->cl_area > 0 ? hier_min(1.0, a / s->cl_area) : 1.0;
+    double extra = floor((double)s->cluster_rays * nl * (a / c->area) * big);
+    return s->cluster_face_rays + (unsigned)hier_min(extra, (double)FACE_MAX_SAMPLES);
+}
+
+/* The entries of face f of cluster receiver c, whose links are
+ * links[0..nl) with sampling probabilities pdf (and cdf, cumulative).
+ *
+ * What face f gathers through them is sum_L F_fL B_L, F_fL its own form
+ * factor to the source of L, with its own orientation and visibility.
+ * K samples estimate it: a link L drawn with probability P(L)
+ * (stratified over the cdf), a point x on f (stratified), a point y
+ * uniform on L's source, and one ray; an open pair with a positive kernel
+ * gives the entry (f, leaf under y, A_S k / (pi K P(L))).  This is
+ * unbiased for any P > 0, and exact where it matters most: a face turned
+ * away from every source, or that no open segment joins to one (inside a
+ * sealed shell), gets nothing, and a face gathers only the radiosity of
+ * the parts of a source its rays reach.  The isotropic push it replaces
+ * handed every face below the cluster a share of the cluster's energy
+ * whatever its visibility (Sillion 1995, sec. 3.2; Smits, Arvo & Greenberg
+ * 1994 compute each member's own transfer, which this samples). */
+static unsigned face_entries(const hier_state *s, uint32_t c, uint32_t f, const hier_clink *links, const double *pdf,
+                             const double *cdf, unsigned nl, hier_centry *out, double *rays)
+{
+    const unsigned K = face_samples(s, &s->cl[c], f, nl);
+    const hier_node *nd = &s->nodes[f];
+    rp_vec3 nf = s->faces[f].n;
+    uint64_t key = hier_key(s->seed ^ CE_SEED, c, f);
+    /* The points on the face follow a golden-ratio sequence in their
+     * first coordinate (well spread for any K, and not in step with the
+     * strata of the link choice). */
+    const double x0 = hier_u01(key, 8 * (uint64_t)K);
+    unsigned n = 0;
+    for (unsigned j = 0; j < K; j++) {
+        double u = (j + hier_u01(key, 8 * (uint64_t)j)) / K;
+        unsigned lo = 0, hi = nl - 1; /* first link with cdf > u */
+        while (lo < hi) {
+            unsigned m = (lo + hi) / 2;
+            if (cdf[m] > u)
+                hi = m;
+            else
+                lo = m + 1;
+        }
+        if (!(pdf[lo] > 0))
+            continue;
+        uint32_t src = links[lo].src, fb;
+        double ux = x0 + 0.6180339887498949 * j;
+        rp_vec3 x = hier_node_point(nd, ux - floor(ux), hier_u01(key, 8 * (uint64_t)j + 2));
+        rp_vec3 y = item_point(s, src, hier_u01(key, 8 * (uint64_t)j + 3), hier_u01(key, 8 * (uint64_t)j + 4),
+                               hier_u01(key, 8 * (uint64_t)j + 5), &fb);
+        rp_vec3 ny = s->faces[fb].n;
+        double w = pair_kernel(x, nf, y, ny);
+        if (!(w > 0))
+            continue;
+        *rays += 1;
+        if (rp_ray_occluded(s->rc, x, nf, y, ny))
+            continue;
+        entry_add(out, &n, f, leaf_at(s, fb, y), src, item_area(s, src) * w / (RP_PI * K * pdf[lo]));
+    }
+    return n;
+}
+
+/* Sampling probabilities of cluster c's links (links[0..nl)): a mixture
+ * of their unoccluded form factors, the same times the sources' current
+ * radiosity (the light arrives through few links) and a uniform part, so
+ * that every link keeps a probability > 0 when the radiosities change. */
+static void link_pdf(const hier_state *s, const hier_clink *links, unsigned nl, double *pdf, double *cdf)
+{
+    double sf = 0, sfb = 0;
+    for (unsigned k = 0; k < nl; k++) {
+        const double *B = item_B(s, links[k].src);
+        double bm = 0;
+        for (size_t b = 0; b < s->nb; b++)
+            bm = hier_max(bm, B[b]);
+        pdf[k] = hier_max(0.0, links[k].Fu);
+        cdf[k] = pdf[k] * bm; /* scratch */
+        sf += pdf[k];
+        sfb += cdf[k];
+    }
+    double wf = sf > 0 ? 0.4 : 0, wfb = sfb > 0 ? 0.4 : 0, wu = 1 - wf - wfb;
+    double acc = 0;
+    for (unsigned k = 0; k < nl; k++) {
+        double p = wu / nl + (wf > 0 ? wf * pdf[k] / sf : 0) + (wfb > 0 ? wfb * cdf[k] / sfb : 0);
+        pdf[k] = p;
+        acc += p;
+        cdf[k] = acc;
+    }
+    cdf[nl - 1] = 1.0 + 1e-12; /* every u in [0, 1) finds a link */
 }
 
 /* ---- refinement ---- */
 
-/* Cluster-link form-factor sums: per node, of the links it receives
- * (cl_nff), and per face root, of those its clusters receive (cl_ff);
- * and which nodes some cluster link reaches. */
+static int u64_cmp(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return x < y ? -1 : (x > y);
+}
+
+/* Cluster-link form-factor sums per node (cl_nff: the entries it
+ * receives) and which nodes some cluster link reaches (cl_nreach). */
 static rp_status cluster_sums(hier_state *s, rp_error *err)
 {
-    const size_t n = s->nfaces, nn = s->nnodes;
+    const size_t nn = s->nnodes;
     if (s->cl_nn < nn) {
         double *f = realloc(s->cl_nff, s->cap_nodes * sizeof *f);
         if (f)
@@ -533,40 +685,316 @@ static rp_status cluster_sums(hier_state *s, rp_error *err)
     s->cl_nn = nn;
     memset(s->cl_nff, 0, nn * sizeof *s->cl_nff);
     memset(s->cl_nreach, 0, nn);
-    double *own = s->cl_G; /* scratch: four doubles per cluster */
-    memset(own, 0, s->ncl * 4 * sizeof *own);
-    unsigned char *chit = calloc(s->ncl ? s->ncl : 1, 1);
-    if (!chit)
-        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for cluster sums");
-    for (size_t k = 0; k < s->nclinks; k++) {
-        uint32_t r = s->clinks[k].recv;
-        if (is_node(r)) {
-            s->cl_nff[r] += s->clinks[k].F;
-            s->cl_nreach[r] = 1;
-        } else {
-            const hier_clink *l = &s->clinks[k];
-            double *o = own + (size_t)(r & ~HIER_CL_BIT) * 4;
-            o[0] += l->F * l->w0;
-            for (int j = 0; j < 3; j++)
-                o[1 + j] += l->F * l->w0 * l->u[j];
-            chit[r & ~HIER_CL_BIT] = 1;
+    const hier_centry *pools[2] = {s->cl_nent, s->cl_cent};
+    const size_t counts[2] = {s->ncl_nent, s->ncl_cent};
+    for (int p = 0; p < 2; p++)
+        for (size_t k = 0; k < counts[p]; k++)
+            if (pools[p][k].F != 0) {
+                s->cl_nff[pools[p][k].recv] += pools[p][k].F;
+                s->cl_nreach[pools[p][k].recv] = 1;
+            }
+    return RP_OK;
+}
+
+/* Cluster c lost links and gained none: the entries drawn for the links
+ * it lost, rm[0..nrm) (cluster << 32 | source, sorted), die (F = 0, left
+ * for compact_pool).  What is left is still unbiased for the links that
+ * stay: each link's entries estimate its own transfer. */
+static void prune_entries(hier_state *s, size_t c, const uint64_t *rm, size_t nrm)
+{
+    hier_centry *e = s->cl_cent + s->cl_efirst[c];
+    size_t n = s->cl_ecount[c];
+    size_t lo = 0, hi = nrm;
+    while (lo < hi) {
+        size_t m = (lo + hi) / 2;
+        if ((rm[m] >> 32) < c)
+            lo = m + 1;
+        else
+            hi = m;
+    }
+    for (hi = lo; hi < nrm && (rm[hi] >> 32) == c; hi++)
+        ;
+    for (size_t k = 0; k < n; k++) {
+        if (e[k].F == 0)
+            continue;
+        uint64_t want = ((uint64_t)c << 32) | e[k].via;
+        size_t x = lo, y = hi;
+        while (x < y) {
+            size_t m = (x + y) / 2;
+            if (rm[m] < want)
+                x = m + 1;
+            else
+                y = m;
+        }
+        if (x < hi && rm[x] == want) {
+            e[k].F = 0;
+            s->ncl_cdead++;
         }
     }
+}
+
+/* Kills entries e[0..n) (their link or cluster drew new ones). */
+static size_t kill_entries(hier_centry *e, size_t n)
+{
+    size_t d = 0;
+    for (size_t k = 0; k < n; k++)
+        if (e[k].F != 0) {
+            e[k].F = 0;
+            d++;
+        }
+    return d;
+}
+
+/* Appends n entries to a pool (*pool, *np used, *cap). */
+static int pool_append(hier_centry **pool, size_t *np, size_t *cap, const hier_centry *e, size_t n)
+{
+    if (*np + n > UINT32_MAX || !hier_grow((void **)pool, cap, *np + n + 1, sizeof **pool))
+        return 0;
+    if (n)
+        memcpy(*pool + *np, e, n * sizeof **pool);
+    *np += n;
+    return 1;
+}
+
+/* Gives a pool's unused storage back beyond a quarter of what it holds. */
+static void pool_trim(hier_centry **pool, size_t n, size_t *cap)
+{
+    size_t want = n + n / 4 + 1024;
+    if (*cap <= want)
+        return;
+    hier_centry *p = realloc(*pool, want * sizeof *p);
+    if (p) {
+        *pool = p;
+        *cap = want;
+    }
+}
+
+/* Pools hold dead entries (F = 0) where links went or clusters drew
+ * again; once they are a quarter of a pool, it is compacted in place (in
+ * link order for the node pool, start order for the cluster pool) and
+ * its storage trimmed. */
+static void compact_pools(hier_state *s, hier_clink *links, size_t nl)
+{
+    if (4 * s->ncl_ndead > s->ncl_nent) {
+        size_t at = 0;
+        for (size_t k = 0; k < nl; k++) {
+            hier_clink *l = &links[k];
+            if (!is_node(l->recv))
+                continue;
+            uint32_t f = l->first, c = l->count, n = 0;
+            for (uint32_t j = 0; j < c; j++)
+                if (s->cl_nent[f + j].F != 0)
+                    s->cl_nent[at + n++] = s->cl_nent[f + j];
+            l->first = (uint32_t)at;
+            l->count = n;
+            at += n;
+        }
+        s->ncl_nent = at;
+        s->ncl_ndead = 0;
+        pool_trim(&s->cl_nent, s->ncl_nent, &s->cap_cl_nent);
+    }
+    if (4 * s->ncl_cdead > s->ncl_cent) {
+        /* Clusters' ranges are not in pool order once some drew again:
+         * order them by their start, then move down. */
+        size_t at = 0;
+        uint32_t *ord = malloc((s->ncl ? s->ncl : 1) * sizeof *ord);
+        if (!ord)
+            return; /* compacted another time */
+        size_t no = 0;
+        for (size_t c = 0; c < s->ncl; c++)
+            if (s->cl_ecount[c])
+                ord[no++] = (uint32_t)c;
+        /* A counting pass over the pool marks each live range's owner:
+         * ranges do not overlap, so sorting by start is a bucket fill. */
+        uint32_t *owner = malloc((s->ncl_cent ? s->ncl_cent : 1) * sizeof *owner);
+        if (!owner) {
+            free(ord);
+            return;
+        }
+        for (size_t k = 0; k < s->ncl_cent; k++)
+            owner[k] = RP_NONE;
+        for (size_t i = 0; i < no; i++)
+            owner[s->cl_efirst[ord[i]]] = ord[i];
+        for (size_t k = 0; k < s->ncl_cent; k++) {
+            uint32_t c = owner[k];
+            if (c == RP_NONE)
+                continue;
+            uint32_t f = s->cl_efirst[c], n = s->cl_ecount[c], m = 0;
+            for (uint32_t j = 0; j < n; j++)
+                if (s->cl_cent[f + j].F != 0)
+                    s->cl_cent[at + m++] = s->cl_cent[f + j];
+            s->cl_efirst[c] = (uint32_t)at;
+            s->cl_ecount[c] = m;
+            at += m;
+            k = (size_t)f + n - 1;
+        }
+        free(owner);
+        free(ord);
+        s->ncl_cent = at;
+        s->ncl_cdead = 0;
+        pool_trim(&s->cl_cent, s->ncl_cent, &s->cap_cl_cent);
+    }
+}
+
+/* Scratch is bounded: new work is done in chunks of about this many
+ * receiving elements (links received by nodes, or faces). */
+#define EVAL_CHUNK 32768
+
+/* Evaluates the links refinement kept: the new ones get their unoccluded
+ * estimate, those received by nodes their entries, and every cluster
+ * that gained links draws its faces' entries again (its old ones die);
+ * one that only lost links loses their entries.  New entries are
+ * computed in parallel a chunk at a time and appended to the pools. */
+static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned char *dirty, const uint64_t *rm,
+                          size_t nrm, rp_error *err)
+{
+    rp_status st = RP_OK;
+    const unsigned N = s->cluster_rays;
+    hier_centry *tmp = NULL;
+    size_t captmp = 0;
+    uint32_t *cnt = NULL, *lstart = NULL, *tasks = NULL, *fill = NULL, *idx = NULL;
+    size_t capcnt = 0, captask = 0, capidx = 0;
+    size_t *toff = NULL;
+    size_t captoff = 0;
+    hier_clink *byc = NULL;
+    double *pdf = NULL, *cdf = NULL;
+    double rays = 0;
+    /* New links received by clusters: their unoccluded estimates. */
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) if (nl > 1024)
+    for (long k = 0; k < (long)nl; k++)
+        if (links[k].Fu < 0 && !is_node(links[k].recv))
+            links[k].Fu = (float)link_unoccluded(s, links[k].recv, links[k].src);
+    /* New links received by nodes: entries, a chunk at a time. */
+    for (size_t k0 = 0; k0 < nl;) {
+        size_t nnew = 0, k1 = k0;
+        for (; k1 < nl && nnew < EVAL_CHUNK; k1++)
+            if (links[k1].count == RP_NONE && is_node(links[k1].recv)) {
+                if (!hier_grow((void **)&idx, &capidx, nnew + 1, sizeof *idx))
+                    goto nomem;
+                idx[nnew++] = (uint32_t)k1;
+            }
+        if (nnew == 0)
+            break;
+        if (!hier_grow((void **)&tmp, &captmp, nnew * N + 1, sizeof *tmp) ||
+            !hier_grow((void **)&cnt, &capcnt, nnew + 1, sizeof *cnt))
+            goto nomem;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (nnew > 64)
+        for (long i = 0; i < (long)nnew; i++) {
+            const hier_clink *l = &links[idx[i]];
+            cnt[i] = node_entries(s, l->recv, l->src, tmp + (size_t)i * N, &rays);
+        }
+        s->form_factors += (double)nnew;
+        for (size_t i = 0; i < nnew; i++) {
+            hier_clink *l = &links[idx[i]];
+            l->first = (uint32_t)s->ncl_nent;
+            l->count = cnt[i];
+            l->Fu = 0;
+            if (!pool_append(&s->cl_nent, &s->ncl_nent, &s->cap_cl_nent, tmp + i * N, cnt[i]))
+                goto nomem;
+        }
+        k0 = k1;
+    }
+    for (size_t k = 0; k < nl; k++)
+        if (links[k].count == RP_NONE) { /* received by a cluster */
+            dirty[links[k].recv & ~HIER_CL_BIT] |= 2;
+            links[k].first = links[k].count = 0;
+        }
+    /* Clusters that only lost links lose their entries. */
+    size_t ngain = 0;
     for (size_t c = 0; c < s->ncl; c++) {
-        uint32_t p = s->cl[c].parent;
-        for (int j = 0; j < 4; j++)
-            s->cl_ffacc[c * 4 + j] = own[c * 4 + j] + (p == RP_NONE ? 0 : s->cl_ffacc[(size_t)p * 4 + j]);
-        if (p != RP_NONE)
-            chit[c] |= chit[p];
+        if (dirty[c] == 1)
+            prune_entries(s, c, rm, nrm);
+        ngain += (dirty[c] & 2) != 0;
     }
-    for (size_t f = 0; f < n; f++) {
-        const double *a = s->cl_ffacc + (size_t)s->face_cl[f] * 4;
-        rp_vec3 nf = s->faces[f].n;
-        s->cl_ff[f] = a[0] + nf.x * a[1] + nf.y * a[2] + nf.z * a[3];
-        s->cl_nreach[f] |= chit[s->face_cl[f]];
+    if (ngain == 0)
+        goto done;
+    /* Links by receiving cluster (CSR, in link order). */
+    lstart = calloc(s->ncl + 1, sizeof *lstart);
+    fill = malloc((s->ncl ? s->ncl : 1) * sizeof *fill);
+    if (!lstart || !fill)
+        goto nomem;
+    size_t ncl_links = 0;
+    for (size_t k = 0; k < nl; k++)
+        if (!is_node(links[k].recv)) {
+            lstart[(links[k].recv & ~HIER_CL_BIT) + 1]++;
+            ncl_links++;
+        }
+    for (size_t c = 0; c < s->ncl; c++)
+        lstart[c + 1] += lstart[c];
+    byc = malloc((ncl_links ? ncl_links : 1) * sizeof *byc);
+    pdf = malloc((ncl_links ? ncl_links : 1) * sizeof *pdf);
+    cdf = malloc((ncl_links ? ncl_links : 1) * sizeof *cdf);
+    if (!byc || !pdf || !cdf)
+        goto nomem;
+    memcpy(fill, lstart, s->ncl * sizeof *fill);
+    for (size_t k = 0; k < nl; k++)
+        if (!is_node(links[k].recv))
+            byc[fill[links[k].recv & ~HIER_CL_BIT]++] = links[k];
+    for (size_t c0 = 0; c0 < s->ncl;) {
+        /* Clusters [c0, c1) and the tasks (cluster, face) of those that
+         * gained links, each task with a slot of face_samples entries. */
+        size_t c1 = c0, ntask = 0, slots = 0;
+        while (c1 < s->ncl && ntask < EVAL_CHUNK) {
+            size_t c = c1++;
+            unsigned n = lstart[c + 1] - lstart[c];
+            if (!(dirty[c] & 2))
+                continue;
+            s->ncl_cdead += kill_entries(s->cl_cent + s->cl_efirst[c], s->cl_ecount[c]);
+            if (n == 0)
+                continue;
+            link_pdf(s, byc + lstart[c], n, pdf + lstart[c], cdf + lstart[c]);
+            const hier_cluster *k = &s->cl[c];
+            if (!hier_grow((void **)&tasks, &captask, 2 * (ntask + k->count), sizeof *tasks) ||
+                !hier_grow((void **)&toff, &captoff, ntask + k->count + 1, sizeof *toff))
+                goto nomem;
+            for (uint32_t i = k->first; i < k->first + k->count; i++) {
+                tasks[2 * ntask] = (uint32_t)c;
+                tasks[2 * ntask + 1] = s->cl_faces[i];
+                toff[ntask] = slots;
+                slots += face_samples(s, k, s->cl_faces[i], n);
+                ntask++;
+            }
+        }
+        if (!hier_grow((void **)&tmp, &captmp, slots + 1, sizeof *tmp) ||
+            !hier_grow((void **)&cnt, &capcnt, ntask + 1, sizeof *cnt))
+            goto nomem;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) reduction(+ : rays) if (ntask > 256)
+        for (long t = 0; t < (long)ntask; t++) {
+            uint32_t c = tasks[2 * t], f = tasks[2 * t + 1];
+            uint32_t a = lstart[c], n = lstart[c + 1] - a;
+            cnt[t] = face_entries(s, c, f, byc + a, pdf + a, cdf + a, n, tmp + toff[t], &rays);
+        }
+        s->form_factors += (double)ntask;
+        size_t t = 0;
+        for (size_t c = c0; c < c1; c++) {
+            if (!(dirty[c] & 2))
+                continue;
+            s->cl_efirst[c] = (uint32_t)s->ncl_cent;
+            for (; t < ntask && tasks[2 * t] == c; t++)
+                if (!pool_append(&s->cl_cent, &s->ncl_cent, &s->cap_cl_cent, tmp + toff[t], cnt[t]))
+                    goto nomem;
+            s->cl_ecount[c] = (uint32_t)(s->ncl_cent - s->cl_efirst[c]);
+        }
+        c0 = c1;
     }
-    free(chit);
-    return RP_OK;
+    goto done;
+nomem:
+    st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for cluster-link entries");
+done:
+    if (st == RP_OK)
+        compact_pools(s, links, nl);
+    s->rays += rays;
+    free(tmp);
+    free(cnt);
+    free(idx);
+    free(lstart);
+    free(fill);
+    free(tasks);
+    free(toff);
+    free(byc);
+    free(pdf);
+    free(cdf);
+    return st;
 }
 
 rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
@@ -578,18 +1006,23 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     rp_status st = RP_OK;
     hier_clink *work = NULL, *kept = NULL, *cand = NULL;
     hier_link *flinks = NULL, *fcand = NULL;
-    unsigned char *act = NULL, *code = NULL;
+    unsigned char *act = NULL, *code = NULL, *dirty = NULL;
     uint32_t *pairs = NULL;
+    uint64_t *rm = NULL; /* (cluster << 32 | source) of stored links that go */
+    size_t nrm = 0, caprm = 0;
     size_t capw = 0, capk = 0, capc = 0, capfl = 0, capfc = 0, capa = 0, capcode = 0, capp = 0;
     size_t nw = 0, nk = 0, nfl = 0;
+    dirty = calloc(s->ncl ? s->ncl : 1, 1);
+    if (!dirty)
+        goto nomem;
     int first = s->nclinks == 0 && !s->linked;
     if (first) {
         if (!hier_grow((void **)&work, &capw, 1, sizeof *work))
             goto nomem;
         work[0].recv = work[0].src = HIER_CL_BIT; /* the root cluster */
-        work[0].F = 0;
-        work[0].u[0] = work[0].u[1] = work[0].u[2] = 0;
-        work[0].w0 = 1;
+        work[0].Fu = -1;
+        work[0].first = 0;
+        work[0].count = RP_NONE;
         nw = 1;
     } else {
         /* The stored links are judged again, with the current radiosities. */
@@ -619,6 +1052,17 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                 continue;
             }
             changed = 1;
+            if (!(l.Fu < 0)) {
+                /* A stored link goes: its receiver's entries go with it. */
+                if (is_node(l.recv))
+                    s->ncl_ndead += kill_entries(s->cl_nent + l.first, l.count);
+                else {
+                    dirty[l.recv & ~HIER_CL_BIT] |= 1;
+                    if (!hier_grow((void **)&rm, &caprm, nrm + 1, sizeof *rm))
+                        goto nomem;
+                    rm[nrm++] = ((uint64_t)(l.recv & ~HIER_CL_BIT) << 32) | l.src;
+                }
+            }
             if (act[k] == 4) {
                 s->clinks_culled++;
                 continue;
@@ -660,9 +1104,9 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                     np++;
                 }
         }
-        /* Form factors of the new links, in parallel, into their slots:
-         * code 0 none, 1 face link, 2 face link with every ray blocked,
-         * 3 cluster link. */
+        /* New pairs, in parallel into their slots: code 0 none, 1 face
+         * link, 2 face link with every ray blocked, 3 cluster link (judged
+         * in the next round, evaluated only if it is kept). */
         if (!hier_grow((void **)&cand, &capc, np ? np : 1, sizeof *cand) ||
             !hier_grow((void **)&fcand, &capfc, np ? np : 1, sizeof *fcand) ||
             !hier_grow((void **)&code, &capcode, np ? np : 1, 1))
@@ -676,21 +1120,12 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                 continue;
             }
             double Fb;
-            int j = judge(s, r, src, &Fb);
             cand[t].recv = r;
             cand[t].src = src;
-            cand[t].F = 0;
-            cand[t].u[0] = cand[t].u[1] = cand[t].u[2] = 0;
-            cand[t].w0 = 1;
-            if (j == 1 && !is_node(r))
-                orient(s, &cand[t]);
-            if (j < 0) {
-                code[t] = 0;
-                continue;
-            }
-            if (j == 1)
-                cand[t].F = clink_eval(s, r, src, &rays);
-            code[t] = 3;
+            cand[t].Fu = -1;
+            cand[t].first = 0;
+            cand[t].count = RP_NONE;
+            code[t] = judge(s, r, src, &Fb) < 0 ? 0 : 3;
         }
         s->rays += rays;
         size_t nn = 0;
@@ -700,16 +1135,15 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                     s->clinks_culled++;
                 continue;
             }
-            s->form_factors++;
             if (code[t] == 3) {
                 cand[nn++] = cand[t];
                 continue;
             }
+            s->form_factors++;
             if (!hier_grow((void **)&flinks, &capfl, nfl + 1, sizeof *flinks))
                 goto nomem;
             flinks[nfl++] = fcand[t];
         }
-        /* The new cluster links are judged in the next round. */
         hier_clink *t = work;
         size_t tc = capw;
         work = cand;
@@ -718,6 +1152,10 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
         capc = tc;
         nw = nn;
     }
+    if (nrm)
+        qsort(rm, nrm, sizeof *rm, u64_cmp);
+    if (changed && (st = evaluate(s, kept, nk, dirty, rm, nrm, err)) != RP_OK)
+        goto done;
     s->clinks = kept;
     s->cap_clinks = capk;
     s->nclinks = nk;
@@ -742,61 +1180,28 @@ done:
     free(act);
     free(code);
     free(pairs);
+    free(dirty);
+    free(rm);
     return st;
 }
 
 /* ---- gathering ---- */
-
-void hier_cluster_gather(hier_state *s)
-{
-    if (!s->clustering)
-        return;
-    const size_t nb = s->nb, n = s->nfaces;
-    cluster_pull(s);
-    double *G = s->cl_G;
-    memset(G, 0, s->ncl * nb * 4 * sizeof *G);
-    for (size_t k = 0; k < s->nclinks; k++) {
-        const hier_clink *l = &s->clinks[k];
-        if (is_node(l->recv))
-            continue; /* hier_cluster_gather_nodes */
-        const double *Bs = item_B(s, l->src);
-        double *g = G + (size_t)(l->recv & ~HIER_CL_BIT) * nb * 4;
-        for (size_t b = 0; b < nb; b++) {
-            double t = l->F * l->w0 * Bs[b];
-            g[4 * b] += t;
-            for (int j = 0; j < 3; j++)
-                g[4 * b + 1 + j] += t * l->u[j];
-        }
-    }
-    for (size_t c = 0; c < s->ncl; c++) {
-        uint32_t p = s->cl[c].parent;
-        double *acc = s->cl_acc + c * nb * 4;
-        const double *g = G + c * nb * 4;
-        for (size_t b = 0; b < 4 * nb; b++)
-            acc[b] = g[b] + (p == RP_NONE ? 0 : s->cl_acc[(size_t)p * nb * 4 + b]);
-    }
-    for (size_t f = 0; f < n; f++) {
-        const double *rho = s->faces[f].rho, *acc = s->cl_acc + (size_t)s->face_cl[f] * nb * 4;
-        rp_vec3 nf = s->faces[f].n;
-        for (size_t b = 0; b < nb; b++) {
-            const double *a = acc + 4 * b;
-            s->cl_push[f * nb + b] = rho[b] * (a[0] + nf.x * a[1] + nf.y * a[2] + nf.z * a[3]);
-        }
-    }
-}
 
 void hier_cluster_gather_nodes(hier_state *s, double *Bg)
 {
     if (!s->clustering)
         return;
     const size_t nb = s->nb;
-    for (size_t k = 0; k < s->nclinks; k++) {
-        const hier_clink *l = &s->clinks[k];
-        if (!is_node(l->recv))
-            continue;
-        const double *Bs = item_B(s, l->src), *rho = item_rho(s, l->recv);
-        double *g = Bg + (size_t)l->recv * nb;
-        for (size_t b = 0; b < nb; b++)
-            g[b] += rho[b] * l->F * Bs[b];
-    }
+    const hier_centry *pools[2] = {s->cl_nent, s->cl_cent};
+    const size_t counts[2] = {s->ncl_nent, s->ncl_cent};
+    for (int p = 0; p < 2; p++)
+        for (size_t k = 0; k < counts[p]; k++) {
+            const hier_centry *e = &pools[p][k];
+            if (e->F == 0)
+                continue;
+            const double *Bs = s->B + (size_t)e->src * nb, *rho = s->faces[s->nodes[e->recv].face].rho;
+            double *g = Bg + (size_t)e->recv * nb;
+            for (size_t b = 0; b < nb; b++)
+                g[b] += rho[b] * e->F * Bs[b];
+        }
 }

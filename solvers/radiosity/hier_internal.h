@@ -102,16 +102,27 @@ typedef struct hier_cluster {
     uint32_t first, count; /* range in cl_faces */
 } hier_cluster;
 
-/* A link with a cluster at one end or both: the receiver gathers F B_src,
- * B_src the source's area-mean radiosity (hier_cluster.c). */
+/* A link with a cluster at one end or both (hier_cluster.c).  The energy
+ * it carries is held as entries: a link received by a quadtree node owns
+ * its entries (first, count in cl_nent), the links received by a cluster
+ * share the entries drawn for its faces (cl_efirst, cl_ecount). */
 typedef struct hier_clink {
-    uint32_t recv, src; /* items */
-    double F;
-    /* A cluster receiver hands face f below it the share
-     * w0 (1 + n_f . u) of F (hier_cluster.c); u = 0, w0 = 1 otherwise. */
-    float u[3];
-    float w0;
+    uint32_t recv, src;    /* items */
+    float Fu;              /* unoccluded form-factor estimate (kernel only);
+                              -1 until the link is evaluated */
+    uint32_t first, count; /* node receivers: entries; count RP_NONE until
+                              evaluated */
 } hier_clink;
+
+/* One sampled piece of cluster-link transfer: node recv (a quadtree node,
+ * or the root of a face below a receiving cluster) gathers rho F B[src],
+ * src the leaf (when drawn) under a point of the source that an open ray
+ * from recv reached. */
+typedef struct hier_centry {
+    uint32_t recv, src;
+    uint32_t via;      /* the source item of the link it was drawn for */
+    float F;
+} hier_centry;
 
 /* Items at or above this id are clusters, below it quadtree nodes. */
 #define HIER_CL_BIT 0x80000000u
@@ -183,23 +194,21 @@ typedef struct hier_state {
     uint32_t *face_cl;   /* nfaces: the cluster a face root is a child of */
     double *cl_rho;      /* ncl x nb: largest reflectance below */
     double *cl_B;        /* ncl x nb: area-mean radiosity */
-    double *cl_G;        /* ncl x nb x 4: gathered F B per cluster (constant
-                            and linear-in-normal parts) */
-    double *cl_acc;      /* ncl x nb x 4: gathered, pushed down */
-    double *cl_push;     /* nfaces x nb: rho x cluster-gathered radiosity of each root */
-    double *cl_ff;       /* nfaces: cluster-link form factors reaching each root
-                            through the clusters above it */
-    double *cl_ffacc;    /* ncl x 4 */
+    uint32_t *cl_efirst, *cl_ecount; /* ncl: each cluster's entries in cl_cent */
+    hier_centry *cl_cent; /* entries of the links clusters receive, by cluster */
+    size_t ncl_cent, cap_cl_cent, ncl_cdead;
+    hier_centry *cl_nent; /* entries of the links quadtree nodes receive, by link */
+    size_t ncl_nent, cap_cl_nent, ncl_ndead; /* (dead entries have F = 0) */
     double *cl_nff;      /* per node (cl_nn of them): form factors of the
-                            cluster links the node receives itself */
-    unsigned char *cl_nreach; /* per node: some cluster link reaches it
-                            (its own, or a cluster's above a root) */
+                            cluster-link entries it receives */
+    unsigned char *cl_nreach; /* per node: some cluster-link entry reaches it */
     size_t cl_nn;
     hier_clink *clinks;
     size_t nclinks, cap_clinks;
     size_t clinks_refined, clinks_culled;
     size_t clinks_initial, links_initial;
     unsigned cluster_rays;
+    unsigned cluster_face_rays; /* samples per face of a receiving cluster */
     double cl_area_rel, cl_area; /* power-error area scale (relative, absolute) */
 
     /* Parameters. */
@@ -238,6 +247,12 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err);
 /* A point on a node from (u1, u2) in [0, 1)^2, uniform in area for
  * triangles and parallelograms. */
 rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2);
+/* Area sampling of a convex polygon poly[0..m-1] (m <= 8): prepare fills
+ * cum[0..m-2] with the cumulative areas of its fan from poly[0] and
+ * returns 0 if the polygon has no area; point maps (u1, u2) in [0, 1)^2 to
+ * a point uniform in area. */
+int hier_polygon_prepare(const rp_vec3 *poly, int m, double *cum);
+rp_vec3 hier_polygon_point(const rp_vec3 *poly, int m, const double *cum, double u1, double u2);
 /* Lambert's contour integral (ground-truth.md): the form factor from a
  * differential area at x with unit normal n to polygon poly[0..m-1],
  * clipped to the half-space in front of x's tangent plane. */
@@ -278,11 +293,8 @@ rp_status hier_cluster_init(hier_state *s, rp_error *err);
 /* One refinement pass over the cluster links (the first one starts from
  * the root's self-link); face pairs become face-level links. */
 rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err);
-/* Gathers over the cluster links with the current radiosities and pushes
- * the result down to the face roots (cl_push), before hier_sweep. */
-void hier_cluster_gather(hier_state *s);
-/* Adds rho F B_src of the cluster links received by quadtree nodes to Bg
- * (hier_sweep, between its gather and its push). */
+/* Adds rho F B_src of every cluster-link entry to the receiving node's
+ * gathered radiosity Bg (hier_sweep, between its gather and its push). */
 void hier_cluster_gather_nodes(hier_state *s, double *Bg);
 void hier_cluster_free(hier_state *s);
 

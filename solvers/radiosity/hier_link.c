@@ -46,6 +46,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "ff_internal.h"
 #include "hier_internal.h"
 
 /* ---- shaft culling ---- */
@@ -260,9 +261,15 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
     uint32_t flags = straddle ? HIER_LINK_STRADDLE : 0;
     if (shaft_blocked(s, q, p)) {
         /* m x m jittered strata on q paired with a random permutation of
-         * m x m strata on p; pairs that face away from each other (possible
-         * when one crosses the other's plane) carry no energy and do not
-         * count. */
+         * m x m strata on p.  When one crosses the other's plane only the
+         * part of each in front of the other can exchange light: the
+         * strata are laid on those two clipped polygons, so every pair
+         * faces the other way round and the rays measure the visibility
+         * of the part that carries the energy.  (Drawn over the whole
+         * elements, all pairs of a sliver pair could face away; with no
+         * ray cast the link used to be taken as fully visible, which let
+         * the room's walls shine into a sealed shell through its inside
+         * surface.) */
         flags |= HIER_LINK_TESTED;
         unsigned m = (unsigned)floor(sqrt((double)s->vis_rays) + 0.5), N = m * m;
         uint64_t key = hier_key(s->seed, q->id, p->id);
@@ -272,12 +279,22 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
         double wsum = 0, wopen = 0, w[64];
         rp_vec3 a[64], b[64];
         unsigned char blocked[64];
+        rp_vec3 qc[8], pc[8];
+        double qcum[8], pcum[8];
+        int nq = 0, np = 0;
+        if (straddle) {
+            nq = (int)rp_ff_clip(q->v, q->nverts, fp->n, fp->d, qc);
+            np = (int)rp_ff_clip(p->v, p->nverts, fq->n, fq->d, pc);
+            if (!hier_polygon_prepare(qc, nq, qcum) || !hier_polygon_prepare(pc, np, pcum))
+                N = 0; /* no part of either faces the other */
+        }
         for (unsigned k = 0; k < N; k++) {
             double u1 = ((k % m) + hier_u01(key, 4 * (uint64_t)k)) / m;
             double u2 = ((k / m) + hier_u01(key, 4 * (uint64_t)k + 1)) / m;
             double w1 = ((perm[k] % m) + hier_u01(key, 4 * (uint64_t)k + 2)) / m;
             double w2 = ((perm[k] / m) + hier_u01(key, 4 * (uint64_t)k + 3)) / m;
-            rp_vec3 x = hier_node_point(q, u1, u2), y = hier_node_point(p, w1, w2);
+            rp_vec3 x = straddle ? hier_polygon_point(qc, nq, qcum, u1, u2) : hier_node_point(q, u1, u2);
+            rp_vec3 y = straddle ? hier_polygon_point(pc, np, pcum, w1, w2) : hier_node_point(p, w1, w2);
             rp_vec3 xy = rp_v3_sub(y, x);
             if (straddle && (rp_v3_dot(xy, fq->n) <= 0 || rp_v3_dot(xy, fp->n) >= 0))
                 continue;
@@ -302,7 +319,8 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
                 wopen += w[k];
             }
         }
-        vis = valid ? (wsum > 0 ? wopen / wsum : (double)open / valid) : 1.0;
+        /* No pair that can carry light: nothing is known to pass. */
+        vis = valid ? (wsum > 0 ? wopen / wsum : (double)open / valid) : 0.0;
         if (open < valid)
             flags |= HIER_LINK_PARTIAL;
         if (!(vis > 0))
@@ -702,7 +720,8 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                 orig[m++] = orig[k];
         if ((st = reserve_links(&s->links, &s->cap_links, m + nkept, err)) != RP_OK)
             goto done;
-        memcpy(s->links + m, kept, nkept * sizeof *kept);
+        if (nkept)
+            memcpy(s->links + m, kept, nkept * sizeof *kept);
         st = links_adopt(s, s->links, m + nkept, err);
     } else {
         /* An idle pass (the usual one near convergence): the sort buffer

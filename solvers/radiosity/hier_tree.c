@@ -195,6 +195,31 @@ rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2)
     return rp_v3_madd(p, nd->v[3], (1 - u1) * u2);
 }
 
+int hier_polygon_prepare(const rp_vec3 *poly, int m, double *cum)
+{
+    cum[0] = 0;
+    for (int k = 1; k + 1 < m; k++)
+        cum[k] = cum[k - 1] + tri_area(poly[0], poly[k], poly[k + 1]);
+    return m >= 3 && cum[m - 2] > 0;
+}
+
+rp_vec3 hier_polygon_point(const rp_vec3 *poly, int m, const double *cum, double u1, double u2)
+{
+    /* The fan triangle whose share of the area holds u1, then u1 rescaled
+     * within it (so strata in u1 stay strata), then Shirley's map. */
+    double t = u1 * cum[m - 2];
+    int k = 1;
+    while (k + 2 < m && cum[k] <= t)
+        k++;
+    double a = cum[k] - cum[k - 1];
+    double v = a > 0 ? (t - cum[k - 1]) / a : 0.5;
+    v = v < 0 ? 0 : (v > 1 ? 1 : v);
+    double r = sqrt(v);
+    rp_vec3 p = rp_v3_scale(poly[0], 1.0 - r);
+    p = rp_v3_madd(p, poly[k], r * (1.0 - u2));
+    return rp_v3_madd(p, poly[k + 1], r * u2);
+}
+
 double hier_point_polygon(rp_vec3 x, rp_vec3 n, const rp_vec3 *poly, int m)
 {
     /* The contour formula holds only for the part of the polygon above x's
@@ -330,9 +355,9 @@ size_t hier_bytes(const hier_state *s)
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
     if (s->clustering)
-        b += s->ncl * (sizeof(hier_cluster) + (10 * s->nb + 4) * sizeof(double)) +
-             s->nfaces * (3 * sizeof(uint32_t) + (2 + s->nb) * sizeof(double)) +
-             s->cl_nn * (sizeof(double) + 1) + s->cap_clinks * sizeof(hier_clink);
+        b += s->ncl * (sizeof(hier_cluster) + 2 * s->nb * sizeof(double) + 2 * sizeof(uint32_t)) +
+             s->nfaces * (3 * sizeof(uint32_t) + sizeof(double)) + s->cl_nn * (sizeof(double) + 1) +
+             s->cap_clinks * sizeof(hier_clink) + (s->cap_cl_cent + s->cap_cl_nent) * sizeof(hier_centry);
     if (s->cull)
         b += s->nfaces * s->nfaces * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t);
     return b;

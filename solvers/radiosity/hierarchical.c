@@ -27,10 +27,10 @@
  * Clustering (hier_cluster.c; Smits, Arvo & Greenberg 1994): above 512
  * faces (--cluster auto) the face roots are the leaves of a cluster
  * hierarchy and linking starts from one self-link at the root cluster
- * instead of every pair of faces.  Cluster links gather with the isotropic
- * approximation; what clusters gather is pushed down to the face roots
- * (cl_push, below), and links to quadtree nodes from clusters add to the
- * nodes' gathered radiosity.  Elements and clusters smaller than
+ * instead of every pair of faces.  Cluster links carry their transfer as
+ * sampled entries, each received by a quadtree node (a face root below a
+ * receiving cluster) with that element's own orientation and visibility,
+ * and added to the node's gathered radiosity.  Elements and clusters smaller than
  * --cluster-area are then refined by their error in power, not radiosity.
  * With clustering off (the default below 512 faces) nothing here changes. */
 #include <math.h>
@@ -81,7 +81,12 @@ static const rp_option_spec hier_options[] = {
      "cluster the faces (Smits, Arvo & Greenberg 1994) and link from the root cluster instead of "
      "every pair of faces; auto: on above 512 faces",
      "auto"},
-    {"cluster-rays", "N", "point pairs (and visibility rays) per cluster link form factor", "16"},
+    {"cluster-rays", "N",
+     "point pairs (and visibility rays) per link from a cluster to a quadtree node", "16"},
+    {"cluster-face-rays", "N",
+     "visibility rays per face below a receiving cluster, shared among the cluster's links (faces "
+     "larger than 1/N of the cluster get more)",
+     "4"},
     {"cluster-area", "FRAC",
      "with clustering, links to elements and clusters smaller than FRAC x the area of the faces "
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
@@ -195,9 +200,8 @@ static void chain_sums(const hier_state *s, double *sum)
             for (uint32_t k = s->link_start[i]; k < s->link_start[i + 1]; k++)
                 own += s->links[k].F;
         if (s->cl_nff && i < s->cl_nn)
-            own += s->cl_nff[i]; /* cluster links it receives (hier_cluster.c) */
-        /* A root also gathers through the cluster links above it. */
-        double up = nd->parent != RP_NONE ? sum[nd->parent] : (s->cl_ff ? s->cl_ff[i] : 0);
+            own += s->cl_nff[i]; /* cluster-link entries it receives (hier_cluster.c) */
+        double up = nd->parent != RP_NONE ? sum[nd->parent] : 0;
         sum[i] = own + up;
     }
 }
@@ -258,7 +262,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->invisible_weight = 0.25;
     s->tolerance = 1e-6;
     s->cl_area_rel = 1e-3;
-    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16, vr = 1, cl = 1;
+    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16, cfrays = 4, vr = 1, cl = 1;
     s->max_faces = HIER_DEFAULT_MAX_FACES;
     if ((st = rp_options_double(o, "bf-epsilon", 0, 1e6, &s->bf_rel, err)) != RP_OK ||
         (st = rp_options_double(o, "min-area", 1e-15, 1, &s->min_area_rel, err)) != RP_OK ||
@@ -273,9 +277,11 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         (st = rp_options_uint(o, "vertex-rays", 1, 64, &vr, err)) != RP_OK ||
         (st = rp_options_uint(o, "contact-levels", 0, 8, &cl, err)) != RP_OK ||
         (st = rp_options_uint(o, "cluster-rays", 1, 256, &crays, err)) != RP_OK ||
+        (st = rp_options_uint(o, "cluster-face-rays", 1, 256, &cfrays, err)) != RP_OK ||
         (st = rp_options_double(o, "cluster-area", 0, 1, &s->cl_area_rel, err)) != RP_OK)
         return st;
     s->cluster_rays = (unsigned)crays;
+    s->cluster_face_rays = (unsigned)cfrays;
     const char *cm = rp_options_get(o, "cluster");
     if (!cm || strcmp(cm, "auto") == 0)
         s->clustering = s->nfaces > HIER_CLUSTER_AUTO_FACES;
@@ -473,10 +479,8 @@ static double hier_sweep(hier_state *s)
         const hier_node *nd = &s->nodes[i];
         int reached = start[i + 1] > start[i] || (s->cl_nreach && i < s->cl_nn && s->cl_nreach[i]);
         if (nd->parent == RP_NONE) {
-            /* Roots start from what the clusters above them gathered
-             * (hier_cluster.c), nothing without clustering. */
             for (size_t b = 0; b < nb; b++)
-                Bd[i * nb + b] = s->cl_push ? s->cl_push[i * nb + b] : 0;
+                Bd[i * nb + b] = 0;
         } else
             reached |= W[nd->parent] > 0;
         W[i] = reached;
@@ -595,7 +599,6 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
     refined += crefined;
     if ((st = update_scale(s, err)) != RP_OK)
         return st;
-    hier_cluster_gather(s);
     s->residual = hier_sweep(s);
     s->iterations++;
     info->rays = s->rays - rays0;
