@@ -106,3 +106,15 @@ Test(realscenes, mcguire_box)
     };
     agree_with_path_tracer("scenes/real/CornellBox-Original.obj", cases, 2);
 }
+
+/* The Utah teapot (McGuire's closed version, 15,704 triangles) in McGuire's
+ * empty box: far above the clustering threshold, so hierarchical radiosity
+ * clusters it; before issue 13 clustering leaked light into it (+58% on the
+ * teapot). */
+Test(realscenes, teapot_in_box)
+{
+    const method_case cases[] = {
+        {"hierarchical", {"bf-epsilon", "min-area"}, {"0.05", "1e-4"}, 2, 0.03},
+    };
+    agree_with_path_tracer("scenes/real/teapot-box.scene", cases, 1);
+}
