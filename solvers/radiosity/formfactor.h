@@ -66,6 +66,24 @@ void rp_ff_scratch_destroy(rp_ff_scratch *s);
  * before). */
 void rp_ff_row(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i, float *row, double *rays);
 
+/* Analytic and Monte Carlo form factors come in reciprocal pairs: of F_ij
+ * and F_ji one is computed (the primary) and the other follows from
+ * A_i F_ij = A_j F_ji, so rp_ff_row, rp_ff_pair and rp_ff_pair_both give
+ * the same value for a pair whichever side asks, and a full matrix costs
+ * half the pairs.  The analytic primary is the pair seen from its smaller
+ * element (the smaller bounding radius; ties: the lower index): its
+ * integral over the receiver is the cheaper and the more accurate one.
+ * Monte Carlo's is i < j.  rp_ff_reciprocal is 0 for the hemicube, whose
+ * rows are computed whole. */
+int rp_ff_reciprocal(const rp_ff_context *ctx);
+int rp_ff_primary(const rp_ff_context *ctx, uint32_t i, uint32_t j);
+/* F_ji from the primary F_ij, as rp_ff_pair(j, i) gives it. */
+double rp_ff_mirror(const rp_ff_context *ctx, uint32_t i, uint32_t j, double fij);
+/* F_ij and F_ji, the pair's one computation (both by rows for the
+ * hemicube). */
+void rp_ff_pair_both(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i, uint32_t j,
+                     double *fij, double *fji, double *rays);
+
 /* One pair; *stderr_out (may be NULL) gets the Monte Carlo standard error
  * (0 for the deterministic methods).  Hemicube computes the whole row. */
 double rp_ff_pair(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i, uint32_t j,
