@@ -40,7 +40,7 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 # installs under libcgal-dev's doc directory; extracted at build time
 # rather than committed.
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
-MESHES := scenes/data/bunny00.off
+MESHES := scenes/data/bunny00.off scenes/data/elephant.off
 
 .PHONY: all deps test check asan demo bench clean meshes fuzz fuzz-deps valgrind
 all: radpt meshes
