@@ -107,7 +107,7 @@
  * RP_FF_VIS_DEPTH bisections deep.  RP_FF_VIS_COUNTER: where the cells'
  * random numbers start in the pair's stream. */
 #define RP_FF_VIS_CELL 5e-4
-#define RP_FF_VIS_MAX_RAYS 4096
+#define RP_FF_VIS_MAX_RAYS 1024
 #define RP_FF_VIS_DEPTH 24
 #define RP_FF_VIS_COUNTER (UINT64_C(1) << 24)
 /* Plane-side tolerance relative to the scene diagonal. */
@@ -1344,11 +1344,13 @@ void rp_ff_row(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i, float *ro
     /* The pairs computed from i's side first, then the others (from
      * theirs): the far-pair rules' per-row edge terms (ff_far_eval) stay
      * valid through the first pass.  The order changes no value. */
-    row[i] = 0;
+    memset(row, 0, ctx->n * sizeof *row);
     for (int pass = 0; pass < 2; pass++)
         for (size_t j = 0; j < ctx->n; j++) {
             if (j == i || rp_ff_primary(ctx, i, (uint32_t)j) != (pass == 0))
                 continue;
+            if (j % 64 == 0 && ctx->p.cancel && atomic_load_explicit(ctx->p.cancel, memory_order_relaxed))
+                return;
             double f = pass == 0 ? ff_primary_pair(ctx, s, i, (uint32_t)j, NULL, rays)
                                  : rp_ff_mirror(ctx, (uint32_t)j, i,
                                              ff_primary_pair(ctx, s, (uint32_t)j, i, NULL, rays));

@@ -14,6 +14,7 @@
 #ifndef RP_FORMFACTOR_H
 #define RP_FORMFACTOR_H
 
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -37,6 +38,10 @@ typedef struct rp_ff_params {
     double tolerance;         /* analytic: error goal per pair, relative to
                                  max(F_ij, min(1, A_j / (pi d_ij^2)))
                                  (0: RP_FF_DEFAULT_TOLERANCE) */
+    /* Cancellation (rp_options.cancel; may be NULL): once set, rp_ff_row
+     * stops within a few pairs and leaves the rest of the row 0; the
+     * caller, polling the same flag, discards it. */
+    const atomic_int *cancel;
 } rp_ff_params;
 
 #define RP_FF_DEFAULT_TOLERANCE 1e-5
@@ -59,7 +64,8 @@ void rp_ff_context_params(const rp_ff_context *ctx, rp_ff_params *out);
 rp_status rp_ff_scratch_create(const rp_ff_context *ctx, rp_ff_scratch **out, rp_error *err);
 void rp_ff_scratch_destroy(rp_ff_scratch *s);
 
-/* Form factors from element i to every element: row[j], j < nelements.
+/* Form factors from element i to every element: row[j], j < nelements
+ * (cut short by params.cancel).
  * Deterministic for a given (params.seed, i).  *rays (may be NULL) gets the
  * visibility rays cast added to it (analytic: a pair's visibility is cast
  * once and shared, so the count, not the row, depends on which rows ran

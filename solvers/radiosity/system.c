@@ -89,6 +89,7 @@ static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, c
     s->ffp.resolution = 0;
     s->ffp.visibility_rays = 0;
     s->ffp.seed = o ? o->seed : 0;
+    s->ffp.cancel = s->cancel;
     const char *v = rp_options_get(o, "ff");
     if (v && (st = rp_ff_method_parse(v, &s->ffp.method, err)) != RP_OK)
         return st;
