@@ -1098,9 +1098,12 @@ static double ff_visibility(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t
     if (ctx->p.visibility_rays) {
         kk = (unsigned)ceil(sqrt((double)ctx->p.visibility_rays) - 1e-9);
     } else {
-        double dist = rp_v3_length(rp_v3_sub(er->c, eq->c));
-        double rho = (er->radius + eq->radius) / dist;
-        kk = rho < 0.25 ? 2 : rho < 0.6 ? 3 : 4;
+        /* Receiver points by the receiver's size against the distance
+         * (visibility varies across it); the source is covered by the
+         * cells.  For elements of one size the same as the old rule on
+         * (r_r + r_q) / d, 4, 9 or 16 up to 1. */
+        double rho = er->radius / rp_v3_length(rp_v3_sub(er->c, eq->c));
+        kk = rho < 0.125 ? 2 : rho < 0.3 ? 3 : rho < 0.5 ? 4 : rho < 1 ? 6 : 8;
     }
     unsigned m = ctx->p.visibility_rays ? ctx->p.visibility_rays : kk * kk;
     uint64_t key = ff_key(ctx->p.seed, r, q);
