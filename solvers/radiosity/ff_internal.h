@@ -90,8 +90,12 @@ struct rp_ff_scratch {
     /* adaptive quadrature heap */
     rp_ff_region *heap;
     size_t heap_cap;
-    /* visibility: cells of the source still to split or to cast to */
+    /* visibility: cells of the source still to split or to cast to, and
+     * the pair's segments (ends, weights, answers) cast together */
     rp_ff_cell *vis_heap;
+    rp_vec3 *vis_x, *vis_y;
+    double *vis_w;
+    unsigned char *vis_blocked;
     /* Far-pair rules on the current receiver: points, weights (Jacobian
      * included) and the per-edge contour terms at those points, valid for
      * edges whose stamp equals `stamp`. */
