@@ -838,3 +838,35 @@ Test(radiosity, final_gather_samples_the_lamp)
     rp_raycast_destroy(rc);
     rp_scene_destroy(sc);
 }
+
+/* Gauss-Seidel's sweep runs in blocks of rows (iterative.c, GS_BLOCK 256):
+ * with more elements than a block, the iterates are the same bit for bit
+ * for 1, 2 and 3 threads, and the solution is direct's (LU) to 1e-6. */
+Test(radiosity, gauss_seidel_blocks_any_thread_count, .init = setup, .timeout = 300)
+{
+    rp_scene *sc = rp_test_load("scenes/cornell.scene");
+    rad_run d;
+    rad_run_ok(&d, &rp_solver_direct, sc, RP_WANT_SURFACES, 0, "elements=600");
+    const size_t n = d.sys->n, nb = 3;
+    cr_assert_gt(n, 512, "%zu elements: not several blocks", n);
+    double *B1 = NULL;
+    const int threads[3] = {1, 2, 3};
+    for (int t = 0; t < 3; t++) {
+        rad_run r;
+        rad_run_ok(&r, &rp_solver_gauss_seidel, sc, RP_WANT_SURFACES, threads[t], "elements=600 tolerance=1e-11");
+        cr_assert_eq(r.sys->n, n);
+        if (!B1) {
+            B1 = malloc(n * nb * sizeof *B1);
+            memcpy(B1, r.sys->B, n * nb * sizeof *B1);
+            for (size_t i = 0; i < n * nb; i++)
+                cr_assert_float_eq(B1[i], d.sys->B[i], 1e-6 * fabs(d.sys->B[i]) + 1e-300,
+                                   "element %zu band %zu: %.12g, direct %.12g", i / nb, i % nb, B1[i], d.sys->B[i]);
+        } else {
+            cr_assert_eq(memcmp(B1, r.sys->B, n * nb * sizeof *B1), 0, "%d threads: another solution", threads[t]);
+        }
+        rad_close(&r);
+    }
+    free(B1);
+    rad_close(&d);
+    rp_scene_destroy(sc);
+}
