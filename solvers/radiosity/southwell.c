@@ -496,7 +496,7 @@ static rp_status sw_estimate(const void *state, rp_estimate *e, rp_error *err)
 const rp_solver_type rp_solver_southwell = {
     .name = "southwell",
     .summary = "finite-element radiosity, progressive refinement (shooting unshot power; "
-               "form factors on the fly, no matrix)",
+               "the stored matrix when it fits, columns on the fly otherwise)",
     .options = sw_options,
     .state_size = sizeof(sw_state),
     .init = sw_init,
