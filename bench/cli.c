@@ -270,6 +270,9 @@ void rp_cli_catch_signals(void (*handler)(int))
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = handler;
+    /* once: a second signal ends the process at once (files are written
+     * to a temporary name and renamed, so none is left half written) */
+    sa.sa_flags = SA_RESETHAND;
     sigemptyset(&sa.sa_mask);
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);

@@ -44,8 +44,8 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
 const char *rp_cli_extra(const rp_cli *cli, const char *name);
 
 /* Routes SIGINT and SIGTERM to handler (which should only set a flag the
- * run loop polls), so long runs stop at the next step and write what they
- * have. */
+ * run loop polls, and the solver through rp_options.cancel), so long runs
+ * stop within a second or so; a second signal ends the process at once. */
 void rp_cli_catch_signals(void (*handler)(int));
 
 /* 0 when the directory a file is to be written into (path's parent) exists

@@ -5,6 +5,7 @@
  * estimate is not solver time. */
 #include <math.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -17,21 +18,31 @@
 #include "resume.h"
 #include "spectrum.h"
 
-/* SIGINT / SIGTERM stop a run at the next step boundary: the image reached
- * so far is still written (marked interrupted), and the exit status is 1. */
-static volatile sig_atomic_t interrupted;
+/* SIGINT / SIGTERM stop a run.  The flag is the solver's cancellation flag
+ * (rp_options.cancel), polled inside set-up and steps: a method stopped
+ * there returns RP_ERR_INTERRUPTED and nothing is written.  Noticed at a
+ * step boundary (a path tracer's pass), the image reached so far is still
+ * written (marked interrupted).  Either way the exit status is 1.  A
+ * lock-free atomic: written by the handler, read by the solver's threads
+ * (C11 7.14.1.1). */
+static atomic_int interrupted;
+_Static_assert(ATOMIC_INT_LOCK_FREE == 2, "the signal flag must be a lock-free atomic");
 
 static void on_signal(int sig)
 {
     (void)sig;
-    interrupted = 1;
+    atomic_store_explicit(&interrupted, 1, memory_order_relaxed);
 }
+
+/* Why run_solver's loop ended. */
+typedef enum run_stop { RUN_RULE, RUN_TIME, RUN_SIGNAL } run_stop;
 
 typedef struct run_totals {
     rp_step_info sum;   /* rays, paths, form factors, iterations added up */
     rp_step_info last;  /* the last step's residual, unshot, progress */
     double seconds;
     size_t steps;
+    run_stop stop;
 } run_totals;
 
 /* render --checkpoint / --resume (resume.h). */
@@ -68,7 +79,6 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
 {
     rp_progress bar;
     rp_progress_begin(&bar, label);
-    rp_cli_catch_signals(on_signal);
     const double seconds0 = tot->seconds;
     double t0 = rp_clock(), excluded = 0, last_ckpt = t0;
     if (ck && ck->converged) {
@@ -96,8 +106,18 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
         char detail[96];
         snprintf(detail, sizeof detail, "%.0f iterations, %.1f s", tot->sum.iterations, tot->seconds);
         rp_progress_update(&bar, frac, detail);
-        if (info.converged || (cli->time_budget > 0 && run_s >= cli->time_budget) || interrupted)
+        if (atomic_load(&interrupted)) {
+            tot->stop = RUN_SIGNAL;
             break;
+        }
+        if (info.converged) {
+            tot->stop = RUN_RULE;
+            break;
+        }
+        if (cli->time_budget > 0 && run_s >= cli->time_budget) {
+            tot->stop = RUN_TIME;
+            break;
+        }
         if (ck && ck->path && now - last_ckpt >= ck->every) {
             rp_status st = write_ckpt(ck, solver, tot, &excluded, err);
             if (st != RP_OK) {
@@ -133,6 +153,44 @@ static void fill_options(rp_options *o, const rp_cli *cli, unsigned want)
     o->count = cli->noptions;
     o->open_ended = cli->time_budget > 0;
     o->log = stderr_log;
+    o->cancel = &interrupted;
+}
+
+/* Whether the run met its method's tolerance: known for methods that
+ * report a residual and a tolerance (the radiosity solvers). */
+typedef struct run_convergence {
+    int known, converged;
+    double residual, tolerance;
+    const char *stopped_by; /* "rule" (the method's own), "iterations" (its cap,
+                               short of the tolerance), "time", "signal" */
+} run_convergence;
+
+/* Fills c; for a run that stopped short of its tolerance, warns on stderr
+ * "radpt: warning: METHOD stopped by WHAT after N UNIT, residual R >
+ * tolerance T: not converged". */
+static void run_convergence_report(const rp_cli *cli, const run_totals *tot, run_convergence *c)
+{
+    const rp_solver_type *t = rp_solver_lookup(cli->method);
+    c->residual = tot->last.residual;
+    c->tolerance = tot->last.tolerance;
+    c->known = c->residual >= 0 && c->tolerance >= 0;
+    c->converged = c->known && c->residual <= c->tolerance;
+    int given = 0;
+    for (size_t i = 0; i < cli->noptions; i++)
+        given |= strcmp(cli->keys[i], "max-iterations") == 0;
+    const char *why = tot->stop == RUN_TIME ? "--time"
+                      : tot->stop == RUN_SIGNAL ? "a signal"
+                      : given ? "--max-iterations"
+                              : "its default --max-iterations";
+    c->stopped_by = tot->stop == RUN_TIME ? "time"
+                    : tot->stop == RUN_SIGNAL ? "signal"
+                    : c->converged || !c->known ? "rule"
+                                                : "iterations";
+    if (c->known && !c->converged)
+        fprintf(stderr, "radpt: warning: %s stopped by %s after %.17g %s, residual %.3g > tolerance %.3g: "
+                        "not converged\n",
+                cli->method, why, tot->sum.iterations, t && t->iteration_name ? t->iteration_name : "iterations",
+                c->residual, c->tolerance);
 }
 
 static void options_text(const rp_cli *cli, char *buf, size_t n)
@@ -251,6 +309,7 @@ int rp_cmd_render(int argc, char **argv)
         (rc = rp_cli_check_output("render", "--png", cli.png)) != 0 ||
         (rc = rp_cli_check_output("render", "--checkpoint", ckpt_path)) != 0)
         return rc;
+    rp_cli_catch_signals(on_signal);
     if ((ckpt_path || resume_path) && !rp_solver_can_checkpoint(rp_solver_lookup(cli.method))) {
         fprintf(stderr, "radpt render: method %s cannot be checkpointed or resumed (only pathtrace can)\n",
                 cli.method);
@@ -308,6 +367,8 @@ int rp_cmd_render(int argc, char **argv)
     st = run_solver(solver, &cli, "render", &tot, ckpt_path || resume_path ? &ck : NULL, &err);
     if (st != RP_OK)
         goto done;
+    run_convergence conv;
+    run_convergence_report(&cli, &tot, &conv);
 
     size_t nb = rp_scene_nbands(scene), npix = (size_t)cam->width * cam->height;
     radiance = malloc(npix * nb * sizeof *radiance);
@@ -329,7 +390,8 @@ int rp_cmd_render(int argc, char **argv)
     if (st != RP_OK)
         goto done;
 
-    char hash[17], seed[32], samples[32], seconds[32], threads[16], rays[32], optstr[1024];
+    char hash[17], seed[32], samples[32], seconds[32], threads[16], rays[32], optstr[1024], residual[32],
+        tolerance[32];
     rp_scene_hash(scene, hash);
     snprintf(seed, sizeof seed, "%llu", (unsigned long long)cli.seed);
     snprintf(samples, sizeof samples, "%.17g", est.samples);
@@ -337,17 +399,23 @@ int rp_cmd_render(int argc, char **argv)
     snprintf(threads, sizeof threads, "%d", cli.threads);
     snprintf(rays, sizeof rays, "%.17g", tot.sum.rays);
     options_text(&cli, optstr, sizeof optstr);
+    snprintf(residual, sizeof residual, "%.17g", conv.residual);
+    snprintf(tolerance, sizeof tolerance, "%.17g", conv.tolerance);
+    /* The convergence attributes come last, only for methods with a
+     * residual and a tolerance. */
     rp_image_attr attrs[] = {
         {"radpt:scene", cli.scene}, {"radpt:scene_hash", hash}, {"radpt:method", cli.method},
         {"radpt:options", optstr},  {"radpt:seed", seed},       {"radpt:samples", samples},
         {"radpt:seconds", seconds}, {"radpt:threads", threads}, {"radpt:rays", rays},
         {"radpt:interrupted", interrupted ? "yes" : "no"},
+        {"radpt:converged", conv.converged ? "yes" : "no"}, {"radpt:residual", residual},
+        {"radpt:tolerance", tolerance}, {"radpt:stopped_by", conv.stopped_by},
     };
     rp_image img = {
         .width = cam->width, .height = cam->height, .nchannels = planes.nchannels,
         .channel_names = (const char *const *)planes.names,
         .planes = (const float *const *)planes.planes,
-        .attrs = attrs, .nattrs = sizeof attrs / sizeof attrs[0],
+        .attrs = attrs, .nattrs = sizeof attrs / sizeof attrs[0] - (conv.known ? 0 : 4),
     };
     st = rp_image_write_exr(cli.out, &img, &err);
     if (st != RP_OK)
@@ -404,6 +472,7 @@ int rp_cmd_probe(int argc, char **argv)
     rp_scene *scene = NULL;
     rp_solver *solver = NULL;
     double *mean = NULL, *se = NULL;
+    rp_cli_catch_signals(on_signal);
     rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 0, &scene, &err);
     if (st != RP_OK)
         goto done;
@@ -417,6 +486,8 @@ int rp_cmd_probe(int argc, char **argv)
     st = run_solver(solver, &cli, "probe", &tot, NULL, &err);
     if (st != RP_OK)
         goto done;
+    run_convergence conv;
+    run_convergence_report(&cli, &tot, &conv);
     size_t nb = rp_scene_nbands(scene), ns = rp_scene_nsurfaces(scene);
     mean = calloc(ns * nb, sizeof *mean);
     se = calloc(ns * nb, sizeof *se);
@@ -444,9 +515,16 @@ int rp_cmd_probe(int argc, char **argv)
         printf(", \"hash\": \"%s\", \"method\": ", hash);
         rp_json_string(stdout, cli.method);
         printf(", \"seed\": %llu, \"samples\": %.17g, \"seconds\": %.6f, \"rays\": %.17g, "
-               "\"form_factors\": %.17g, \"memory_bytes\": %.17g, \"surfaces\": [",
+               "\"form_factors\": %.17g, \"memory_bytes\": %.17g",
                (unsigned long long)cli.seed, est.samples, tot.seconds, tot.sum.rays, tot.sum.form_factors,
                tot.last.memory);
+        /* null where the method has no residual and tolerance */
+        if (conv.known)
+            printf(", \"converged\": %s, \"residual\": %.17g, \"tolerance\": %.17g", conv.converged ? "true" : "false",
+                   conv.residual, conv.tolerance);
+        else
+            printf(", \"converged\": null, \"residual\": null, \"tolerance\": null");
+        printf(", \"stopped_by\": \"%s\", \"surfaces\": [", conv.stopped_by);
         for (size_t s = 0; s < ns; s++) {
             printf("%s{\"name\": ", s ? ", " : "");
             rp_json_string(stdout, surf[s].name);

@@ -37,6 +37,7 @@ const char *rp_status_string(rp_status status)
     case RP_ERR_RUNTIME: return "runtime failure";
     case RP_ERR_NOMEM: return "out of memory";
     case RP_ERR_UNSUPPORTED: return "unsupported";
+    case RP_ERR_INTERRUPTED: return "interrupted";
     }
     return "unknown status";
 }

@@ -13,7 +13,8 @@ typedef enum rp_status {
     RP_ERR_INPUT,       /* bad input: scene, mesh file, option (exit 2) */
     RP_ERR_RUNTIME,     /* the run failed: I/O, library error (exit 1) */
     RP_ERR_NOMEM,       /* allocation failed (exit 1) */
-    RP_ERR_UNSUPPORTED  /* the method cannot answer this request (exit 1) */
+    RP_ERR_UNSUPPORTED, /* the method cannot answer this request (exit 1) */
+    RP_ERR_INTERRUPTED  /* stopped on request (rp_options.cancel) (exit 1) */
 } rp_status;
 
 typedef struct rp_error {

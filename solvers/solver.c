@@ -47,6 +47,7 @@ rp_status rp_solver_step(rp_solver *s, rp_step_info *info, rp_error *err)
 {
     memset(info, 0, sizeof *info);
     info->residual = -1;
+    info->tolerance = -1;
     info->unshot = -1;
     return s->type->step(s->state, info, err);
 }
@@ -259,6 +260,7 @@ rp_status rp_solver_load(rp_solver *s, FILE *f, rp_step_info *info, rp_error *er
 {
     memset(info, 0, sizeof *info);
     info->residual = -1;
+    info->tolerance = -1;
     info->unshot = -1;
     if (!rp_solver_can_checkpoint(s->type))
         return no_checkpoint(s->type, err);

@@ -8,6 +8,7 @@
 #ifndef RP_SOLVER_H
 #define RP_SOLVER_H
 
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -46,7 +47,20 @@ typedef struct rp_options {
     int open_ended;
     rp_log_fn log;        /* may be NULL */
     void *log_ctx;
+    /* Cancellation (may be NULL): set non-zero by the caller (a signal
+     * handler: a lock-free atomic may be written there, C11 7.14.1.1) to
+     * stop a run.  Methods poll it in their long loops, in init as in
+     * step (per row, per shot, per block: within a second or so), and
+     * return RP_ERR_INTERRUPTED when they stop for it; the state is then
+     * only good for fini. */
+    const atomic_int *cancel;
 } rp_options;
+
+/* 1 once cancellation has been asked for (cancel may be NULL). */
+static inline int rp_cancelled(const atomic_int *cancel)
+{
+    return cancel && atomic_load_explicit(cancel, memory_order_relaxed) != 0;
+}
 
 /* Work done by one step (added up by the harness). */
 typedef struct rp_step_info {
@@ -55,8 +69,13 @@ typedef struct rp_step_info {
     double form_factors;  /* form factors computed */
     double iterations;    /* sweeps, shots or sample passes completed */
     double residual;      /* relative residual after the step, or -1 */
+    double tolerance;     /* the residual the method's rule aims for, or -1
+                             (none): a run stopped before residual <=
+                             tolerance has not converged, whatever stopped
+                             it (--time, an iteration cap, a signal) */
     double unshot;        /* unshot power fraction, or -1 */
-    int converged;        /* the method's own stopping rule is met */
+    int converged;        /* the method's own stopping rule is met (its
+                             tolerance, or its iteration cap: see tolerance) */
     double progress;      /* fraction of the way to that rule, in [0, 1] */
     double memory;        /* bytes the method holds after the step (matrices,
                              buffers), 0 if not reported */
@@ -86,6 +105,9 @@ typedef struct rp_solver_type {
     rp_status (*step)(void *state, rp_step_info *info, rp_error *err);
     rp_status (*estimate)(const void *state, rp_estimate *estimate, rp_error *err);
     void (*fini)(void *state);
+    /* What one iteration is, plural, for messages ("sweeps", "shots");
+     * NULL: "iterations". */
+    const char *iteration_name;
     /* Optional (NULL: the method cannot be checkpointed).  save writes the
      * state accumulated so far to f as the method's own little-endian
      * fields; load reads them back into a state fresh from init with the

@@ -1,6 +1,11 @@
 /* End-to-end: the radpt command as a user runs it (DESIGN.md, "Command
  * line"): exit statuses, one-line errors, JSON, no partial output files. */
 #include <criterion/criterion.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <time.h>
+#include "bench/image.h"
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -499,4 +504,128 @@ Test(cli, mcguire_box_path_tracer_agrees_with_radiosity)
     }
     rp_run_free(&pt);
     rp_run_free(&gs);
+}
+
+/* ---- runs that stop early (issue 13, part 4) ---------------------------- */
+
+static double mono_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* SIGTERM while a uniform solver computes its form-factor matrix (the
+ * set-up: n^2 / 2 pairs, about 15 s of CPU for 8,000 elements of the
+ * Cornell box, minutes under a sanitizer): the run ends at once, exit
+ * status 1, no output file, and the message says it was interrupted.
+ * The bound on the time to stop is generous (10 s) for loaded machines;
+ * without the cancellation flag the set-up alone takes longer. */
+Test(cli, sigterm_during_uniform_setup_ends_the_run, .timeout = 300)
+{
+    char out[64], errp[64];
+    snprintf(out, sizeof out, "/tmp/rp_sigterm.%d.exr", (int)getpid());
+    snprintf(errp, sizeof errp, "/tmp/rp_sigterm.%d.err", (int)getpid());
+    unlink(out);
+    unlink(errp);
+    pid_t pid = fork();
+    cr_assert_geq(pid, 0);
+    if (pid == 0) {
+        int fe = open(errp, O_WRONLY | O_CREAT | O_TRUNC, 0644), fo = open("/dev/null", O_WRONLY);
+        if (fe < 0 || fo < 0 || chdir(RP_SOURCE_DIR) != 0)
+            _exit(127);
+        dup2(fe, 2);
+        dup2(fo, 1);
+        execl(RP_BIN, RP_BIN, "render", "scenes/cornell.scene", "--method", "gauss-seidel", "--elements", "8000",
+              "-o", out, (char *)NULL);
+        _exit(127);
+    }
+    /* The solver's first message ends its init; the matrix comes next. */
+    int started = 0, status = 0;
+    for (int i = 0; i < 2400 && !started; i++) {
+        char *e = rp_read_file(errp);
+        started = e && strstr(e, "dense single-precision matrix");
+        free(e);
+        if (!started) {
+            cr_assert_eq(waitpid(pid, &status, WNOHANG), 0, "radpt ended before its set-up");
+            struct timespec ts = {0, 50000000};
+            nanosleep(&ts, NULL);
+        }
+    }
+    if (!started)
+        kill(pid, SIGKILL);
+    cr_assert(started, "no set-up message from radpt in 120 s");
+    struct timespec ts = {0, 500000000};
+    nanosleep(&ts, NULL);
+    double t0 = mono_seconds();
+    cr_assert_eq(kill(pid, SIGTERM), 0);
+    cr_assert_eq(waitpid(pid, &status, 0), pid);
+    double dt = mono_seconds() - t0;
+    char *e = rp_read_file(errp);
+    cr_assert(e);
+    cr_expect(WIFEXITED(status) && WEXITSTATUS(status) == 1, "status %d; stderr: %s", status, e);
+    cr_expect_lt(dt, 10.0, "took %.1f s to stop after SIGTERM", dt);
+    cr_expect(strstr(e, "interrupted") != NULL, "stderr: %s", e);
+    cr_expect(strstr(e, "form factors computed") == NULL, "the matrix was finished: %s", e);
+    cr_expect(access(out, F_OK) != 0, "an interrupted run left %s", out);
+    free(e);
+    unlink(errp);
+    unlink(out);
+}
+
+/* A run cut short by --max-iterations or --time reports converged: false
+ * and its residual (probe --json; render's EXR metadata) and warns on
+ * stderr; a converged one reports converged: true with residual <=
+ * tolerance; a method without a residual reports null. */
+Test(cli, unconverged_runs_say_so, .timeout = 120)
+{
+    rp_run r = rp_run_radpt("probe scenes/cornell.scene --method gauss-seidel --elements 200 --max-iterations 2 "
+                            "--surface-averages --json");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.out, "\"converged\": false") != NULL, "%s", r.out);
+    double res = rp_json_number_after(r.out, "{", "residual"), tol = rp_json_number_after(r.out, "{", "tolerance");
+    cr_expect(res > tol && tol == 1e-6, "residual %g, tolerance %g", res, tol);
+    cr_expect(strstr(r.out, "\"stopped_by\": \"iterations\"") != NULL, "%s", r.out);
+    cr_expect(strstr(r.err, "warning: gauss-seidel stopped by --max-iterations after 2 sweeps, residual") &&
+                  strstr(r.err, "not converged"),
+              "stderr: %s", r.err);
+    rp_run_free(&r);
+
+    r = rp_run_radpt("probe scenes/cornell.scene --method southwell --elements 200 --time 1e-9 "
+                     "--surface-averages --json");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.out, "\"converged\": false") && strstr(r.out, "\"stopped_by\": \"time\""), "%s", r.out);
+    cr_expect(strstr(r.err, "warning: southwell stopped by --time after 1 shots") != NULL, "stderr: %s", r.err);
+    rp_run_free(&r);
+
+    r = rp_run_radpt("probe scenes/cornell.scene --method gauss-seidel --elements 200 --tolerance 1e-4 "
+                     "--surface-averages --json");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.out, "\"converged\": true") != NULL, "%s", r.out);
+    res = rp_json_number_after(r.out, "{", "residual");
+    cr_expect(res <= 1e-4 && res >= 0, "residual %g", res);
+    cr_expect(strstr(r.err, "not converged") == NULL, "stderr: %s", r.err);
+    rp_run_free(&r);
+
+    r = rp_run_radpt("probe scenes/cornell.scene --method pathtrace --samples 16 --surface-averages --json");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.out, "\"converged\": null, \"residual\": null") != NULL, "%s", r.out);
+    rp_run_free(&r);
+
+    char out[64];
+    snprintf(out, sizeof out, "/tmp/rp_unconverged.%d.exr", (int)getpid());
+    char args[256];
+    snprintf(args, sizeof args, "render scenes/cornell.scene --method jacobi --elements 200 --max-iterations 3 --spp 1 "
+             "-o %s", out);
+    r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.err, "warning: jacobi stopped by --max-iterations after 3 sweeps") != NULL, "stderr: %s", r.err);
+    char *conv = rp_image_read_exr_attr(out, "radpt:converged");
+    char *rtext = rp_image_read_exr_attr(out, "radpt:residual");
+    cr_expect(conv && strcmp(conv, "no") == 0, "radpt:converged %s", conv ? conv : "(none)");
+    cr_expect(rtext && strtod(rtext, NULL) > 1e-6, "radpt:residual %s", rtext ? rtext : "(none)");
+    free(conv);
+    free(rtext);
+    rp_run_free(&r);
+    unlink(out);
 }

@@ -143,4 +143,5 @@ const rp_solver_type rp_solver_direct = {
     .step = direct_step,
     .estimate = direct_estimate,
     .fini = direct_fini,
+    .iteration_name = "solves",
 };

@@ -40,6 +40,16 @@ typedef struct rp_ff_region {
     int axis;         /* axis to split along next (0: u, 1: v) */
 } rp_ff_region;
 
+/* A cell [u0,u1] x [v0,v1] of a source element's parameter square in the
+ * visibility estimate (formfactor.c, ff_visibility): f is the unoccluded
+ * form factor to it from the current receiver point, inside a point of
+ * its part in front of that point. */
+typedef struct rp_ff_cell {
+    double u0, u1, v0, v1, f;
+    rp_vec3 inside;
+    int depth;
+} rp_ff_cell;
+
 struct rp_ff_context {
     const rp_scene *scene;
     const rp_mesh *mesh;
@@ -82,6 +92,12 @@ struct rp_ff_scratch {
     /* adaptive quadrature heap */
     rp_ff_region *heap;
     size_t heap_cap;
+    /* visibility: cells of the source still to split or to cast to, and
+     * the pair's segments (ends, weights, answers) cast together */
+    rp_ff_cell *vis_heap;
+    rp_vec3 *vis_x, *vis_y;
+    double *vis_w;
+    unsigned char *vis_blocked;
     /* Far-pair rules on the current receiver: points, weights (Jacobian
      * included) and the per-edge contour terms at those points, valid for
      * edges whose stamp equals `stamp`. */

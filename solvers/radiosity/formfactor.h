@@ -14,6 +14,7 @@
 #ifndef RP_FORMFACTOR_H
 #define RP_FORMFACTOR_H
 
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -37,6 +38,10 @@ typedef struct rp_ff_params {
     double tolerance;         /* analytic: error goal per pair, relative to
                                  max(F_ij, min(1, A_j / (pi d_ij^2)))
                                  (0: RP_FF_DEFAULT_TOLERANCE) */
+    /* Cancellation (rp_options.cancel; may be NULL): once set, rp_ff_row
+     * stops within a few pairs and leaves the rest of the row 0; the
+     * caller, polling the same flag, discards it. */
+    const atomic_int *cancel;
 } rp_ff_params;
 
 #define RP_FF_DEFAULT_TOLERANCE 1e-5
@@ -59,12 +64,31 @@ void rp_ff_context_params(const rp_ff_context *ctx, rp_ff_params *out);
 rp_status rp_ff_scratch_create(const rp_ff_context *ctx, rp_ff_scratch **out, rp_error *err);
 void rp_ff_scratch_destroy(rp_ff_scratch *s);
 
-/* Form factors from element i to every element: row[j], j < nelements.
+/* Form factors from element i to every element: row[j], j < nelements
+ * (cut short by params.cancel).
  * Deterministic for a given (params.seed, i).  *rays (may be NULL) gets the
  * visibility rays cast added to it (analytic: a pair's visibility is cast
  * once and shared, so the count, not the row, depends on which rows ran
  * before). */
 void rp_ff_row(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i, float *row, double *rays);
+
+/* Analytic and Monte Carlo form factors come in reciprocal pairs: of F_ij
+ * and F_ji one is computed (the primary) and the other follows from
+ * A_i F_ij = A_j F_ji, so rp_ff_row, rp_ff_pair and rp_ff_pair_both give
+ * the same value for a pair whichever side asks, and a full matrix costs
+ * half the pairs.  The analytic primary is the pair seen from its smaller
+ * element (the smaller bounding radius; ties: the lower index): its
+ * integral over the receiver is the cheaper and the more accurate one.
+ * Monte Carlo's is i < j.  rp_ff_reciprocal is 0 for the hemicube, whose
+ * rows are computed whole. */
+int rp_ff_reciprocal(const rp_ff_context *ctx);
+int rp_ff_primary(const rp_ff_context *ctx, uint32_t i, uint32_t j);
+/* F_ji from the primary F_ij, as rp_ff_pair(j, i) gives it. */
+double rp_ff_mirror(const rp_ff_context *ctx, uint32_t i, uint32_t j, double fij);
+/* F_ij and F_ji, the pair's one computation (both by rows for the
+ * hemicube). */
+void rp_ff_pair_both(const rp_ff_context *ctx, rp_ff_scratch *s, uint32_t i, uint32_t j,
+                     double *fij, double *fji, double *rays);
 
 /* One pair; *stderr_out (may be NULL) gets the Monte Carlo standard error
  * (0 for the deterministic methods).  Hemicube computes the whole row. */

@@ -143,6 +143,7 @@ typedef struct hier_state {
     int open_ended;
     rp_log_fn log;
     void *log_ctx;
+    const atomic_int *cancel; /* rp_options.cancel, polled by the long loops */
     uint64_t seed;
     rp_raycast *rc;
 

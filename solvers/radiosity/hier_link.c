@@ -445,6 +445,8 @@ rp_status hier_link_initial(hier_state *s, rp_error *err)
     for (size_t i0 = 0; i0 < n; i0 += R) {
         size_t i1 = i0 + R < n ? i0 + R : n;
         double rays = 0;
+        if (rp_cancelled(s->cancel) && (st = rp_error_set(err, RP_ERR_INTERRUPTED, "hierarchical: interrupted")))
+            goto done;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 1) reduction(+ : rays) collapse(2)
         for (long i = (long)i0; i < (long)i1; i++)
             for (long j = 0; j < (long)n; j++) {
@@ -573,6 +575,8 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
         }
     /* Round 0 judged the stored links, later rounds the fresh ones. */
     for (int round = 0;; round++) {
+        if (rp_cancelled(s->cancel) && (st = rp_error_set(err, RP_ERR_INTERRUPTED, "hierarchical: interrupted")))
+            goto done;
         size_t capm0 = capm;
         if (!hier_grow((void **)&mark, &capm, s->nnodes, 1))
             goto nomem;

@@ -253,6 +253,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->open_ended = o ? o->open_ended : 0;
     s->log = o ? o->log : NULL;
     s->log_ctx = o ? o->log_ctx : NULL;
+    s->cancel = o ? o->cancel : NULL;
     s->seed = o ? o->seed : 0;
 
     rp_status st;
@@ -605,6 +606,7 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
     info->form_factors = s->form_factors - ff0;
     info->iterations = 1;
     info->residual = s->residual;
+    info->tolerance = s->tolerance;
     s->bytes = hier_bytes(s);
     info->memory = (double)s->bytes;
     int tol_rule = s->tolerance_given || !s->open_ended;
@@ -707,4 +709,5 @@ const rp_solver_type rp_solver_hierarchical = {
     .step = hier_step,
     .estimate = hier_estimate,
     .fini = hier_fini,
+    .iteration_name = "sweeps",
 };

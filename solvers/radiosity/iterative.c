@@ -89,24 +89,44 @@ static rp_status jacobi_step(void *state, rp_step_info *info, rp_error *err)
 static inline void gs_update(rp_rad_system *sys, size_t i, const float *row)
 {
     const size_t n = sys->n, nb = sys->nb;
-    double *B = sys->B;
-    if (nb == 1) {
-        double a = 0;
-        for (size_t j = 0; j < n; j++)
-            a += row[j] * B[j];
-        B[i] = sys->E[i] + sys->rho[i] * a;
-        return;
-    }
     double acc[RP_RAD_MAX_BANDS];
+    rp_rad_dot(row, sys->B, n, nb, acc);
     for (size_t b = 0; b < nb; b++)
-        acc[b] = 0;
-    for (size_t j = 0; j < n; j++) {
-        double f = row[j];
-        for (size_t b = 0; b < nb; b++)
-            acc[b] += f * B[j * nb + b];
+        sys->B[i * nb + b] = sys->E[i * nb + b] + sys->rho[i * nb + b] * acc[b];
+}
+
+/* A Gauss-Seidel sweep over the stored matrix, in blocks of GS_BLOCK rows
+ * (a constant, so the sums, hence the iterates, are the same for any
+ * thread count): for the rows of a block, the part of F B over the columns
+ * outside the block (new values before it, old ones after) is computed in
+ * parallel, then the rows are updated in order with the block's own
+ * columns.  The same iteration as row-by-row Gauss-Seidel, the sums only
+ * grouped differently, and all but GS_BLOCK / n of the work parallel. */
+#define GS_BLOCK 256
+
+static void gs_sweep_dense(rp_rad_system *sys)
+{
+    const size_t n = sys->n, nb = sys->nb;
+    const float *F = sys->F;
+    double *B = sys->B, *P = sys->G; /* G: scratch until the residual's F B */
+    for (size_t i0 = 0; i0 < n; i0 += GS_BLOCK) {
+        size_t i1 = i0 + GS_BLOCK < n ? i0 + GS_BLOCK : n;
+#pragma omp parallel for num_threads(sys->threads) schedule(static)
+        for (long i = (long)i0; i < (long)i1; i++) {
+            const float *row = F + (size_t)i * n;
+            double a[RP_RAD_MAX_BANDS], c[RP_RAD_MAX_BANDS];
+            rp_rad_dot(row, B, i0, nb, a);
+            rp_rad_dot(row + i1, B + i1 * nb, n - i1, nb, c);
+            for (size_t b = 0; b < nb; b++)
+                P[(size_t)i * nb + b] = a[b] + c[b];
+        }
+        for (size_t i = i0; i < i1; i++) {
+            double acc[RP_RAD_MAX_BANDS];
+            rp_rad_dot(F + i * n + i0, B + i0 * nb, i1 - i0, nb, acc);
+            for (size_t b = 0; b < nb; b++)
+                B[i * nb + b] = sys->E[i * nb + b] + sys->rho[i * nb + b] * (P[i * nb + b] + acc[b]);
+        }
     }
-    for (size_t b = 0; b < nb; b++)
-        B[i * nb + b] = sys->E[i * nb + b] + sys->rho[i * nb + b] * acc[b];
 }
 
 static rp_status gs_step(void *state, rp_step_info *info, rp_error *err)
@@ -118,8 +138,7 @@ static rp_status gs_step(void *state, rp_step_info *info, rp_error *err)
     if (sys->dense) {
         if ((st = rp_rad_system_matrix(sys, info, err)) != RP_OK)
             return st;
-        for (size_t i = 0; i < n; i++)
-            gs_update(sys, i, sys->F + i * n);
+        gs_sweep_dense(sys);
     } else {
         /* Rows do not depend on B: compute a block of them in parallel,
          * then update in element order. */
@@ -128,20 +147,28 @@ static rp_status gs_step(void *state, rp_step_info *info, rp_error *err)
             size_t i1 = i0 + R < n ? i0 + R : n;
             double rays = 0, ff = 0, max_sum = sys->max_row_sum;
             long bad = -1;
+            int stop = 0;
 #pragma omp parallel for num_threads(sys->threads) schedule(dynamic, 1) reduction(+ : rays, ff) \
-    reduction(max : max_sum, bad)
+    reduction(max : max_sum, bad, stop)
             for (long i = (long)i0; i < (long)i1; i++) {
+                if (rp_cancelled(sys->cancel)) {
+                    stop = 1;
+                    continue;
+                }
                 float *buf = sys->rowbuf + (size_t)(i - (long)i0) * n;
                 rp_rad_row(sys, (uint32_t)i, sys->scratch[omp_get_thread_num()], buf, &ff, &rays);
                 double sum;
                 if (rp_rad_check_row(sys, (uint32_t)i, buf, &sum, NULL) != RP_OK)
                     bad = bad < 0 || i < bad ? i : bad;
-                if (sum > max_sum)
-                    max_sum = sum;
+                if (sys->row_sum[i] > max_sum)
+                    max_sum = sys->row_sum[i];
             }
             info->rays += rays;
             info->form_factors += ff;
             sys->max_row_sum = max_sum;
+            if (stop)
+                return rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted in sweep %lu", sys->name,
+                                    sys->iterations + 1);
             for (size_t i = i0; i < i1; i++) {
                 const float *row = sys->rowbuf + (i - i0) * n;
                 double sum;
@@ -151,6 +178,7 @@ static rp_status gs_step(void *state, rp_step_info *info, rp_error *err)
                 gs_update(sys, i, row);
             }
         }
+        rp_rad_report_scaled(sys);
     }
     if ((st = rp_rad_matvec(sys, sys->B, sys->G, info, err)) != RP_OK)
         return st;
@@ -173,6 +201,7 @@ const rp_solver_type rp_solver_jacobi = {
     .step = jacobi_step,
     .estimate = it_estimate,
     .fini = it_fini,
+    .iteration_name = "sweeps",
 };
 
 const rp_solver_type rp_solver_gauss_seidel = {
@@ -184,4 +213,5 @@ const rp_solver_type rp_solver_gauss_seidel = {
     .step = gs_step,
     .estimate = it_estimate,
     .fini = it_fini,
+    .iteration_name = "sweeps",
 };

@@ -2,6 +2,7 @@
 #include "system.h"
 
 #include <limits.h>
+#include <stddef.h>
 #include <math.h>
 #include <omp.h>
 #include <stdarg.h>
@@ -46,6 +47,8 @@ void rp_rad_system_fini(rp_rad_system *s)
     free(s->E);
     free(s->B);
     free(s->G);
+    free(s->row_sum);
+    free(s->row_scaled);
     memset(s, 0, sizeof *s);
 }
 
@@ -86,6 +89,7 @@ static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, c
     s->ffp.resolution = 0;
     s->ffp.visibility_rays = 0;
     s->ffp.seed = o ? o->seed : 0;
+    s->ffp.cancel = s->cancel;
     const char *v = rp_options_get(o, "ff");
     if (v && (st = rp_ff_method_parse(v, &s->ffp.method, err)) != RP_OK)
         return st;
@@ -158,6 +162,7 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
     s->open_ended = o ? o->open_ended : 0;
     s->log = o ? o->log : NULL;
     s->log_ctx = o ? o->log_ctx : NULL;
+    s->cancel = o && o->size >= offsetof(rp_options, cancel) + sizeof o->cancel ? o->cancel : NULL;
     s->residual = -1;
     if (o && o->threads < 0)
         return rp_error_set(err, RP_ERR_INPUT, "%s: %d threads", cfg->name, o->threads);
@@ -175,6 +180,8 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
 
     if ((st = rp_mesh_create(scene, &mp, &s->mesh, err)) != RP_OK)
         return st;
+    if (rp_cancelled(s->cancel))
+        return rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted while meshing", cfg->name);
     s->n = rp_mesh_nelements(s->mesh);
     const size_t n = s->n, nb = s->nb;
     if (n == 0)
@@ -191,6 +198,9 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
         return st;
     if ((st = rp_ff_context_create(scene, s->mesh, s->rc, &s->ffp, &s->ff, err)) != RP_OK)
         return st;
+    if (rp_cancelled(s->cancel))
+        return rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted while setting up form factors",
+                            cfg->name);
     s->scratch = calloc((size_t)s->threads, sizeof *s->scratch);
     if (!s->scratch)
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
@@ -203,9 +213,11 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
     s->E = malloc(n * nb * sizeof *s->E);
     s->B = malloc(n * nb * sizeof *s->B);
     s->G = calloc(n * nb, sizeof *s->G);
-    if (!s->area || !s->rho || !s->E || !s->B || !s->G)
+    s->row_sum = calloc(n, sizeof *s->row_sum);
+    s->row_scaled = calloc(n, 1);
+    if (!s->area || !s->rho || !s->E || !s->B || !s->G || !s->row_sum || !s->row_scaled)
         return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory for %zu elements", cfg->name, n);
-    s->bytes = n * sizeof *s->area + 4 * n * nb * sizeof(double);
+    s->bytes = n * (sizeof *s->area + sizeof *s->row_sum + 1) + 4 * n * nb * sizeof(double);
     const rp_element *el = rp_mesh_elements(s->mesh);
     const rp_material *mats = rp_scene_materials(scene);
     const rp_surface *surfs = rp_scene_surfaces(scene);
@@ -298,6 +310,54 @@ rp_status rp_rad_check_row(const rp_rad_system *s, uint32_t i, const float *row,
     return RP_OK;
 }
 
+void rp_rad_scale_row(const rp_rad_system *s, uint32_t i, float *row)
+{
+    const size_t n = s->n, nb = s->nb;
+    double sum = 0, shoot[RP_RAD_MAX_BANDS];
+    for (size_t b = 0; b < nb; b++)
+        shoot[b] = 0;
+    for (size_t j = 0; j < n; j++) {
+        double f = row[j];
+        sum += f;
+        for (size_t b = 0; b < nb; b++)
+            shoot[b] += s->rho[j * nb + b] * f;
+    }
+    int scale = sum > 1 + RP_RAD_ROW_SUM_TOL;
+    for (size_t b = 0; b < nb; b++)
+        scale |= s->rho[(size_t)i * nb + b] * sum >= 1 || shoot[b] >= 1;
+    s->row_sum[i] = sum;
+    s->row_scaled[i] = 0;
+    /* Not a finite positive sum: left for rp_rad_check_row to refuse. */
+    if (!scale || !(sum > 0) || !isfinite(sum))
+        return;
+    for (size_t j = 0; j < n; j++)
+        row[j] = (float)(row[j] / sum);
+    s->row_scaled[i] = 1;
+}
+
+void rp_rad_report_scaled(rp_rad_system *s)
+{
+    if (s->rows_reported)
+        return;
+    s->rows_reported = 1;
+    size_t count = 0, worst = 0;
+    for (size_t i = 0; i < s->n; i++)
+        if (s->row_scaled[i]) {
+            if (!count || s->row_sum[i] > s->row_sum[worst])
+                worst = i;
+            count++;
+        }
+    s->rows_scaled = count;
+    if (!count)
+        return;
+    const rp_element *el = rp_mesh_elements(s->mesh);
+    rp_rad_log(s, "warning: %s: %zu of %zu rows of form factors summed to more than 1 + %g (or broke "
+               "rho sum F < 1) and were scaled to sum 1; the worst, element %zu of surface '%s', summed "
+               "to %.6g (form-factor error: try more elements where small and large elements meet)",
+               s->name, count, s->n, RP_RAD_ROW_SUM_TOL, worst,
+               rp_scene_surfaces(s->scene)[el[worst].surface].name, s->row_sum[worst]);
+}
+
 const float *rp_rad_row(const rp_rad_system *s, uint32_t i, rp_ff_scratch *scratch, float *buf,
                         double *ff, double *rays)
 {
@@ -305,6 +365,7 @@ const float *rp_rad_row(const rp_rad_system *s, uint32_t i, rp_ff_scratch *scrat
         return s->F + (size_t)i * s->n;
     rp_ff_row(s->ff, scratch, i, buf, rays);
     *ff += (double)s->n;
+    rp_rad_scale_row(s, i, buf);
     return buf;
 }
 
@@ -316,93 +377,94 @@ static rp_status rad_first_bad_row(const rp_rad_system *s, const float *row, uin
     return rp_rad_check_row(s, i, row, &sum, err);
 }
 
+static rp_status rad_interrupted(const rp_rad_system *s, const char *what, rp_error *err)
+{
+    return rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted while %s", s->name, what);
+}
+
+/* F by pairs (analytic and Monte Carlo form factors): row i computes the
+ * pairs whose primary side is i (rp_ff_primary) and writes both F_ij and,
+ * in column i, F_ji = F_ij A_i / A_j (Cohen & Wallace 1993, eq. 4.4),
+ * exactly as rp_ff_row would give them: half the work of computing every
+ * row, and A_i F_ij = A_j F_ji to float rounding.  No two rows write the
+ * same entry; each primary depends only on (seed, pair), so F is the same
+ * for any thread count. */
+static int rad_fill_pairs(rp_rad_system *s, double *rays_out, double *ff_out)
+{
+    const size_t n = s->n;
+    float *F = s->F;
+    double rays = 0, ff = 0;
+    int stop = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : rays, ff) \
+    reduction(max : stop)
+    for (long i = 0; i < (long)n; i++) {
+        if (rp_cancelled(s->cancel)) {
+            stop = 1;
+            continue;
+        }
+        rp_ff_scratch *scr = s->scratch[omp_get_thread_num()];
+        F[(size_t)i * n + (size_t)i] = 0;
+        for (size_t j = 0; j < n; j++)
+            if (j != (size_t)i && rp_ff_primary(s->ff, (uint32_t)i, (uint32_t)j)) {
+                double fij, fji;
+                rp_ff_pair_both(s->ff, scr, (uint32_t)i, (uint32_t)j, &fij, &fji, &rays);
+                F[(size_t)i * n + j] = (float)fij;
+                F[j * n + (size_t)i] = (float)fji;
+                ff += 1;
+            }
+    }
+    *rays_out += rays;
+    *ff_out += ff;
+    return stop;
+}
+
 rp_status rp_rad_system_matrix(rp_rad_system *s, rp_step_info *info, rp_error *err)
 {
     if (!s->dense || s->matrix_ready)
         return RP_OK;
     const size_t n = s->n;
-    double rays = 0;
+    double rays = 0, ff = 0;
     float *F = s->F;
-    if (!s->reciprocity) {
-        /* Row by row: each depends only on (seed, i), so F is the same for
-         * any thread count.  This is the default because the analytic
-         * method's visibility fraction comes from rays between points
-         * drawn for the ordered pair (i, j): reciprocity then holds to
-         * about 1e-7 for unoccluded pairs but only to about 1e-3 where
-         * visibility is partial. */
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : rays)
-        for (long i = 0; i < (long)n; i++)
-            rp_ff_row(s->ff, s->scratch[omp_get_thread_num()], (uint32_t)i, F + (size_t)i * n, &rays);
-        info->form_factors += (double)n * (double)n;
+    int stop = 0;
+    if (rp_ff_reciprocal(s->ff)) {
+        stop = rad_fill_pairs(s, &rays, &ff);
     } else {
-        /* --reciprocity: each pair i < j once, F_ji = F_ij A_i / A_j
-         * (Cohen & Wallace 1993, eq. 4.4); half the work.  The thread on
-         * row i writes F_ij (j > i) and F_ji (column i below the
-         * diagonal), which no other row's thread touches. */
-        const double *A = s->area;
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 1) reduction(+ : rays)
+        /* Whole rows (hemicube). */
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : rays, ff) \
+    reduction(max : stop)
         for (long i = 0; i < (long)n; i++) {
-            rp_ff_scratch *scr = s->scratch[omp_get_thread_num()];
-            F[(size_t)i * n + (size_t)i] = 0;
-            for (size_t j = (size_t)i + 1; j < n; j++) {
-                double f = rp_ff_pair(s->ff, scr, (uint32_t)i, (uint32_t)j, NULL, &rays);
-                F[(size_t)i * n + j] = (float)f;
-                F[j * n + (size_t)i] = (float)(f * A[i] / A[j]);
+            if (rp_cancelled(s->cancel)) {
+                stop = 1;
+                continue;
             }
+            rp_ff_row(s->ff, s->scratch[omp_get_thread_num()], (uint32_t)i, F + (size_t)i * n, &rays);
+            ff += (double)n;
         }
-        info->form_factors += 0.5 * (double)n * (double)(n - 1);
     }
     info->rays += rays;
+    info->form_factors += ff;
+    if (stop)
+        return rad_interrupted(s, "computing form factors", err);
 
     long bad = LONG_MAX;
-    double max_sum = 0;
-#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(min : bad) reduction(max : max_sum)
+#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(min : bad)
     for (long i = 0; i < (long)n; i++) {
         double sum;
+        rp_rad_scale_row(s, (uint32_t)i, F + (size_t)i * n);
         if (rp_rad_check_row(s, (uint32_t)i, F + (size_t)i * n, &sum, NULL) != RP_OK && i < bad)
             bad = i;
-        if (sum > max_sum)
-            max_sum = sum;
     }
     if (bad != LONG_MAX)
         return rad_first_bad_row(s, F + (size_t)bad * n, (uint32_t)bad, err);
+    double max_sum = 0;
+    for (size_t i = 0; i < n; i++)
+        max_sum = s->row_sum[i] > max_sum ? s->row_sum[i] : max_sum;
     s->max_row_sum = max_sum;
     s->matrix_ready = 1;
     rp_rad_log(s, "%s: %zu x %zu form factors computed (%.1f MiB), largest row sum %.9g", s->name, n, n,
                MIB(n * n * sizeof(float)), max_sum);
+    rp_rad_report_scaled(s);
     return RP_OK;
-}
-
-/* acc[b] = sum_j row[j] X[j, b]. */
-static inline void rad_dot(const float *row, const double *X, size_t n, size_t nb, double *acc)
-{
-    if (nb == 1) {
-        double a = 0;
-        for (size_t j = 0; j < n; j++)
-            a += row[j] * X[j];
-        acc[0] = a;
-        return;
-    }
-    if (nb == 3) {
-        double a0 = 0, a1 = 0, a2 = 0;
-        for (size_t j = 0; j < n; j++) {
-            double f = row[j];
-            a0 += f * X[3 * j];
-            a1 += f * X[3 * j + 1];
-            a2 += f * X[3 * j + 2];
-        }
-        acc[0] = a0;
-        acc[1] = a1;
-        acc[2] = a2;
-        return;
-    }
-    for (size_t b = 0; b < nb; b++)
-        acc[b] = 0;
-    for (size_t j = 0; j < n; j++) {
-        double f = row[j];
-        for (size_t b = 0; b < nb; b++)
-            acc[b] += f * X[j * nb + b];
-    }
 }
 
 rp_status rp_rad_matvec(rp_rad_system *s, const double *X, double *Y, rp_step_info *info, rp_error *err)
@@ -415,37 +477,45 @@ rp_status rp_rad_matvec(rp_rad_system *s, const double *X, double *Y, rp_step_in
         const float *F = s->F;
 #pragma omp parallel for num_threads(s->threads) schedule(static)
         for (long i = 0; i < (long)n; i++)
-            rad_dot(F + (size_t)i * n, X, n, nb, Y + (size_t)i * nb);
+            rp_rad_dot(F + (size_t)i * n, X, n, nb, Y + (size_t)i * nb);
         return RP_OK;
     }
     /* Rows on the fly: every row is computed (and checked) again. */
     double rays = 0, ff = 0, max_sum = s->max_row_sum;
     long bad = LONG_MAX;
+    int stop = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : rays, ff) \
-    reduction(min : bad) reduction(max : max_sum)
+    reduction(min : bad) reduction(max : max_sum, stop)
     for (long i = 0; i < (long)n; i++) {
+        if (rp_cancelled(s->cancel)) {
+            stop = 1;
+            continue;
+        }
         int t = omp_get_thread_num();
         float *buf = s->rowbuf + (size_t)t * n;
         const float *row = rp_rad_row(s, (uint32_t)i, s->scratch[t], buf, &ff, &rays);
         double sum;
+        if (s->row_sum[i] > max_sum)
+            max_sum = s->row_sum[i];
         if (rp_rad_check_row(s, (uint32_t)i, row, &sum, NULL) != RP_OK) {
             if (i < bad)
                 bad = i;
             continue;
         }
-        if (sum > max_sum)
-            max_sum = sum;
-        rad_dot(row, X, n, nb, Y + (size_t)i * nb);
+        rp_rad_dot(row, X, n, nb, Y + (size_t)i * nb);
     }
     info->rays += rays;
     info->form_factors += ff;
     s->max_row_sum = max_sum;
+    if (stop)
+        return rad_interrupted(s, "computing form factors", err);
     if (bad != LONG_MAX) {
         float *buf = s->rowbuf;
         double dff = 0, drays = 0;
         rp_rad_row(s, (uint32_t)bad, s->scratch[0], buf, &dff, &drays);
         return rad_first_bad_row(s, buf, (uint32_t)bad, err);
     }
+    rp_rad_report_scaled(s);
     return RP_OK;
 }
 
@@ -472,6 +542,7 @@ void rp_rad_step_done(rp_rad_system *s, double residual, rp_step_info *info)
     s->residual = residual;
     info->iterations += 1;
     info->residual = residual;
+    info->tolerance = s->tolerance;
     info->memory = (double)s->bytes;
     /* With the harness's own budget (open_ended) a rule stops the run only
      * when its option was given. */
