@@ -310,9 +310,29 @@ rp_status rp_rad_check_row(const rp_rad_system *s, uint32_t i, const float *row,
     return RP_OK;
 }
 
+/* 1 if element i neither reflects nor emits in any band: its radiosity is
+ * 0 whatever it sees, and what others see of it adds nothing. */
+static int rad_black(const rp_rad_system *s, size_t i)
+{
+    for (size_t b = 0; b < s->nb; b++)
+        if (s->rho[i * s->nb + b] != 0 || s->E[i * s->nb + b] != 0)
+            return 0;
+    return 1;
+}
+
 void rp_rad_scale_row(const rp_rad_system *s, uint32_t i, float *row)
 {
     const size_t n = s->n, nb = s->nb;
+    /* Form factors to and from black elements are dropped before the row
+     * is judged: they carry no light (B_j = 0 for a black j, and a black
+     * row is never gathered), so a huge black ground plane, whose form
+     * factors are the hardest to estimate, cannot scale the rows of the
+     * scene it lies under (issue 13: nothing may change when one is
+     * added). */
+    const int black_row = rad_black(s, i);
+    for (size_t j = 0; j < n; j++)
+        if (row[j] != 0 && (black_row || rad_black(s, j)))
+            row[j] = 0;
     double sum = 0, shoot[RP_RAD_MAX_BANDS];
     for (size_t b = 0; b < nb; b++)
         shoot[b] = 0;
