@@ -122,7 +122,7 @@ static void print_json(const rp_scene *scene, const char *path, int closed, cons
         printf(", \"elements\": {\"count\": %zu, \"vertices\": %zu, \"target\": %d, "
                "\"aspect_min\": %.6g, \"aspect_mean\": %.6g, \"aspect_max\": %.6g, "
                "\"area_min\": %.6g, \"area_max\": %.6g}",
-               rp_mesh_nelements(mesh), rp_mesh_nvertices(mesh), RP_MESH_DEFAULT_COUNT,
+               rp_mesh_nelements(mesh), rp_mesh_nvertices(mesh), (int)(RP_MESH_DEFAULT_COUNT + rp_scene_nfaces(scene)),
                q.min_aspect, q.mean_aspect, q.max_aspect, q.min_area, q.max_area);
     }
     printf("}\n");
@@ -180,8 +180,8 @@ static void print_text(const rp_scene *scene, const char *path, int closed, cons
     if (mesh) {
         rp_mesh_quality q;
         rp_mesh_quality_get(mesh, &q);
-        printf("elements  %zu (default subdivision, target %d), %zu vertices\n", rp_mesh_nelements(mesh),
-               RP_MESH_DEFAULT_COUNT, rp_mesh_nvertices(mesh));
+        printf("elements  %zu (default subdivision, target %d: one per face and %d more), %zu vertices\n", rp_mesh_nelements(mesh),
+               (int)(RP_MESH_DEFAULT_COUNT + rp_scene_nfaces(scene)), RP_MESH_DEFAULT_COUNT, rp_mesh_nvertices(mesh));
         printf("quality   aspect ratio min %.3f mean %.3f max %.3f (1 is best); area %.4g to %.4g\n",
                q.min_aspect, q.mean_aspect, q.max_aspect, q.min_area, q.max_area);
     }

@@ -389,8 +389,13 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
                                 "mesh: set max_edge or target_count, not both (%g and %zu)", max_edge,
                                 target);
     }
+    /* The default: every face one element, and RP_MESH_DEFAULT_COUNT more
+     * spread by area, so a finely tessellated object (a scanned mesh, a
+     * tessellated sphere) does not take the walls' elements (McGuire's
+     * CornellBox-Sphere: 2,188 faces left the ceiling one element and
+     * Gauss-Seidel 8.6% dark; with this default, 1.0%). */
     if (max_edge == 0 && target == 0)
-        target = RP_MESH_DEFAULT_COUNT;
+        target = RP_MESH_DEFAULT_COUNT + rp_scene_nfaces(scene);
     if (target > RP_MESH_MAX_ELEMENTS)
         return rp_error_set(err, RP_ERR_INPUT, "mesh: %zu elements asked for; the cap is %zu (memory)",
                             target, RP_MESH_MAX_ELEMENTS);

@@ -48,7 +48,7 @@ typedef struct rp_mesh_quality {
 } rp_mesh_quality;
 
 /* Subdivides every face of the scene.  With both max_edge and target_count
- * zero, uses RP_MESH_DEFAULT_COUNT.  Exactly one of them may be set.  Faces
+ * zero, aims at RP_MESH_DEFAULT_COUNT elements more than the scene's faces.  Exactly one of them may be set.  Faces
  * of surfaces black in every band (rho = Le = 0) are never cut: one element
  * each, counted in target_count; the rest of the count goes to the faces
  * that reflect or emit, so a black ground plane changes nothing else. */

@@ -119,7 +119,7 @@ static const rp_option_spec sj_options[] = {
     {"elements", "N",
      "target element count for the whole scene: one per face black in every band, the rest spread over the "
      "faces that reflect or emit (exclusive with --max-edge)",
-     "1000"},
+     "the faces + 1000"},
     {"max-edge", "L", "target longest element edge in scene units (exclusive with --elements)", NULL},
     {"rays", "N", "rays per iteration, all batches together (rounded down to a multiple of --batches)",
      "100000"},

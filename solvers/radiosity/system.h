@@ -115,7 +115,7 @@ typedef struct rp_rad_system {
     {"elements", "N",                                                                        \
      "target element count for the whole scene: one per face black in every band, the rest " \
      "spread over the faces that reflect or emit (exclusive with --max-edge)",               \
-     "1000"},                                                                                \
+     "the faces + 1000"},                                                                                \
     {"max-edge", "L", "target longest element edge in scene units (exclusive with --elements)", \
      NULL},                                                                                  \
     {"ff", "analytic|montecarlo|hemicube",                                                   \
