@@ -10,7 +10,7 @@
 
 DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
                 libembree-dev libcgal-dev libcgal-demo libgmp-dev libmpfr-dev libcriterion-dev \
-                libpng-dev libtinyobjloader-dev gnuplot-nox
+                libpng-dev gnuplot-nox
 
 CC  ?= gcc
 CXX ?= g++
@@ -25,7 +25,7 @@ CPPFLAGS := -I. $(GSL_CFLAGS) -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
 CFLAGS   := -std=c11 $(OPT) -g -Wall -Wextra -Werror -fopenmp -MMD -MP $(SANITIZE)
 # CGAL is heavy to compile: no -g, one or two translation units.
 CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(SANITIZE)
-LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng -ltinyobjloader_double $(GSL_LIBS) \
+LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng $(GSL_LIBS) \
             -lgmp -lmpfr -lstdc++ -lm
 LDFLAGS  := -fopenmp $(SANITIZE)
 
