@@ -85,14 +85,13 @@ typedef struct real_result {
     double *ref, *ref_se;          /* band means */
     int *compared;                 /* area share >= AREA_SHARE and not a pure emitter */
     real_cmp *cmp;                 /* nsurfaces * NMETHODS */
-    double seconds[NMETHODS], peak_mb[NMETHODS], iterations[NMETHODS];
+    double seconds[NMETHODS], peak_mb[NMETHODS];
     int converged[NMETHODS], ran[NMETHODS];
     char error[NMETHODS][160];
     char skipped[NMETHODS][200];   /* why a method was not run, or "" */
     char spec[NMETHODS][256];      /* the spec as run */
     double max_rel[NMETHODS], rms_rel[NMETHODS];
     size_t fails[NMETHODS];
-    double ref_seconds;
     unsigned long ref_spp, ref_samples;
 } real_result;
 
@@ -144,7 +143,6 @@ static rp_status compare(const rp_scene *scene, const rp_reference *ref, const r
         r->ref_se[i] = band_mean(ref->surface_stderr + i * nb, nb);
         r->compared[i] = r->area_share[i] >= AREA_SHARE && ref->surface_mask[i];
     }
-    r->ref_seconds = ref->seconds;
     r->ref_spp = ref->spp;
     r->ref_samples = ref->samples;
     for (size_t bm = 0; bm < b->nmethods; bm++) {
@@ -165,7 +163,6 @@ static rp_status compare(const rp_scene *scene, const rp_reference *ref, const r
             const rp_checkpoint *cp = &t->cp[t->ncp - 1];
             r->seconds[m] = cp->wall_s;
             r->peak_mb[m] = cp->peak_rss_mb;
-            r->iterations[m] = cp->iterations;
             r->converged[m] = cp->converged;
         }
         double ss = 0;
