@@ -29,8 +29,13 @@ LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng $(GSL_LIBS) \
             -lgmp -lmpfr -lstdc++ -lm
 LDFLAGS  := -fopenmp $(SANITIZE)
 
+# libradpt.a: scenes and geometry, the solvers, and the measuring harness
+# (bench/run: driver, references, metrics; bench/report: files, charts,
+# images; bench/experiments).  The command line (bench/cli) is not in it.
 LIB_C   := $(wildcard geometry/*.c solvers/*.c solvers/*/*.c) \
-           $(filter-out bench/main.c, $(wildcard bench/*.c))
+           $(wildcard bench/run/*.c bench/report/*.c bench/experiments/*.c)
+CLI_C   := $(wildcard bench/cli/*.c)
+CLI_OBJ := $(CLI_C:%.c=$(BUILD)/%.o)
 LIB_CXX := $(wildcard geometry/cgal/*.cpp)
 LIB_OBJ := $(LIB_C:%.c=$(BUILD)/%.o) $(LIB_CXX:%.cpp=$(BUILD)/%.o)
 TEST_C  := $(wildcard tests/*.c)
@@ -48,7 +53,7 @@ all: radpt meshes
 radpt: $(BUILD)/radpt
 	cp $< $@
 
-$(BUILD)/radpt: $(BUILD)/bench/main.o $(BUILD)/libradpt.a
+$(BUILD)/radpt: $(CLI_OBJ) $(BUILD)/libradpt.a
 	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
 
 $(BUILD)/libradpt.a: $(LIB_OBJ)
@@ -215,4 +220,4 @@ independent: deps
 clean:
 	rm -rf build build-asan build-fuzz build-valgrind radpt scenes/data
 
--include $(LIB_OBJ:.o=.d) $(TEST_OBJ:.o=.d) $(BUILD)/bench/main.d
+-include $(LIB_OBJ:.o=.d) $(TEST_OBJ:.o=.d) $(CLI_OBJ:.o=.d)

@@ -13,7 +13,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../bench/image.h"
+#include "bench/report/image.h"
 #include "cli_util.h"
 
 /* A 40 x 32 Cornell box (the built-in one with a smaller image, so a pass

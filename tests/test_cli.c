@@ -5,7 +5,7 @@
 #include <signal.h>
 #include <sys/wait.h>
 #include <time.h>
-#include "bench/image.h"
+#include "bench/report/image.h"
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

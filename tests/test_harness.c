@@ -1,4 +1,4 @@
-/* The benchmark harness (bench/harness.h, metrics.h, reference.h, plot.h):
+/* The benchmark harness (bench/run/harness.h, metrics.h, reference.h; bench/report/plot.h):
  * metrics on hand-made images, log-log fits on synthetic data, the
  * reference cache, the furnace's exact reference, and a tiny benchmark
  * whose runs.csv and summary.json must agree with each other and with the
@@ -11,10 +11,10 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "bench/harness.h"
-#include "bench/metrics.h"
-#include "bench/plot.h"
-#include "bench/reference.h"
+#include "bench/run/harness.h"
+#include "bench/run/metrics.h"
+#include "bench/report/plot.h"
+#include "bench/run/reference.h"
 #include "geometry/scene.h"
 #include "scene_util.h"
 

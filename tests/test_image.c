@@ -1,4 +1,4 @@
-/* bench/image.c: EXR round trips (bit-exact), attributes, atomic writes,
+/* bench/report/image.c: EXR round trips (bit-exact), attributes, atomic writes,
  * and the sRGB PNG preview checked against IEC 61966-2-1 by hand. */
 #include <criterion/criterion.h>
 
@@ -14,7 +14,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "bench/image.h"
+#include "bench/report/image.h"
 #include "cli_util.h"
 
 /* ---------------------------------------------------------------------

@@ -8,7 +8,7 @@
  * the double-precision distance to a wall across it; a 1e-4 gap beside a
  * black plane 1e8 wide; element ids against a point-in-polygon search over the
  * face's elements.  Scenes come from rp_scene_parse.  Also a smoke test of
- * the ray-throughput benchmark (bench/raybench.h). */
+ * the ray-throughput benchmark (bench/run/raybench.h). */
 #include <criterion/criterion.h>
 
 #include <float.h>
@@ -18,7 +18,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "bench/raybench.h"
+#include "bench/run/raybench.h"
 #include "geometry/mesh.h"
 #include "geometry/raycast.h"
 #include "geometry/scene.h"

@@ -13,7 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "bench/experiments.h"
+#include "bench/experiments/experiments.h"
 #include "cli_util.h"
 
 #define MAXF 16

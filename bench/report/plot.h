@@ -11,26 +11,11 @@
 #include <stddef.h>
 #include <stdio.h>
 
-#include "../geometry/status.h"
-#include "harness.h"
-#include "image.h"
+#include "geometry/status.h"
+#include "bench/run/harness.h"
+#include "bench/report/image.h"
+#include "bench/report/files.h"
 
-/* mkdir -p. */
-rp_status rp_mkdirs(const char *path, rp_error *err);
-
-/* A text file written atomically: rp_out_open makes PATH.tmp.PID, and
- * rp_out_close renames it over PATH (or removes it when ok is 0 or a write
- * failed). */
-typedef struct rp_out {
-    FILE *f;
-    char path[1024];
-    char tmp[1100];
-} rp_out;
-rp_status rp_out_open(rp_out *o, const char *path, rp_error *err);
-rp_status rp_out_close(rp_out *o, int ok, rp_error *err);
-
-/* Joins dir and name into buf. */
-const char *rp_path_join(char *buf, size_t n, const char *dir, const char *name);
 
 /* gnuplot: which terminal draws PNGs ("pngcairo", or "png" when cairo is
  * missing), NULL when gnuplot is not installed.  Probed once. */

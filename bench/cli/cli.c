@@ -1,6 +1,6 @@
-#include "cli.h"
+#include "bench/cli/cli.h"
 
-#include "../geometry/default_camera.h"
+#include "geometry/default_camera.h"
 
 #include <errno.h>
 #include <math.h>
@@ -11,12 +11,6 @@
 #include <time.h>
 #include <unistd.h>
 
-double rp_clock(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 static int usage(const rp_cli *cli, const char *fmt, const char *a)
 {
@@ -226,19 +220,6 @@ void rp_progress_end(rp_progress *p)
         fputc('\n', stderr);
 }
 
-void rp_json_string(FILE *f, const char *s)
-{
-    fputc('"', f);
-    for (const unsigned char *c = (const unsigned char *)s; *c; c++) {
-        if (*c == '"' || *c == '\\')
-            fprintf(f, "\\%c", *c);
-        else if (*c < 0x20)
-            fprintf(f, "\\u%04x", *c);
-        else
-            fputc(*c, f);
-    }
-    fputc('"', f);
-}
 
 int rp_cli_check_output(const char *command, const char *option, const char *path)
 {
@@ -278,39 +259,6 @@ void rp_cli_catch_signals(void (*handler)(int))
     sigaction(SIGTERM, &sa, NULL);
 }
 
-rp_status rp_cli_load_scene(const char *path, const char *camera, int need_camera, rp_scene **out, rp_error *err)
-{
-    *out = NULL;
-    rp_camera given;
-    rp_status st;
-    if (camera && (st = rp_camera_parse(camera, "--camera", &given, err)) != RP_OK)
-        return st;
-    rp_scene *scene = NULL;
-    if ((st = rp_scene_load(path, &scene, err)) != RP_OK)
-        return st;
-    for (size_t i = 0; i < rp_scene_nwarnings(scene); i++)
-        fprintf(stderr, "radpt: warning: %s\n", rp_scene_warning(scene, i));
-    if (camera) {
-        st = rp_scene_set_camera(scene, &given, err);
-    } else if (need_camera && !rp_scene_camera(scene)) {
-        rp_camera def;
-        st = rp_scene_default_camera(scene, &def, err);
-        if (st == RP_OK)
-            st = rp_scene_set_camera(scene, &def, err);
-        if (st == RP_OK) {
-            char words[512];
-            rp_camera_format(&def, words, sizeof words);
-            fprintf(stderr, "radpt: %s has no camera; using the default, which is --camera \"%s\"\n", path,
-                    words);
-        }
-    }
-    if (st != RP_OK) {
-        rp_scene_destroy(scene);
-        return st;
-    }
-    *out = scene;
-    return RP_OK;
-}
 
 const char *rp_cli_name(const char *name, char *buf, size_t len)
 {

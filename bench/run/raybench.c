@@ -4,13 +4,13 @@
  * omp_get_wtime (a monotonic wall clock).  Random numbers come from a
  * counter-based hash (SplitMix64, Steele, Lea & Flood 2014) of (seed, ray,
  * dimension), so the rays are the same for any thread count. */
-#include "raybench.h"
+#include "bench/run/raybench.h"
 
 #include <math.h>
 #include <omp.h>
 #include <stdlib.h>
 
-#include "../geometry/sample.h"
+#include "geometry/sample.h"
 
 /* Rays generated and cast per chunk: 64 Ki rays are about 4.5 MB of origins,
  * normals and directions, enough to amortise the parallel-region start. */

@@ -6,7 +6,7 @@
  * and fsync it, then rename(2) it over PATH.  Any failure unlinks the
  * temporary file, so PATH either holds a complete new image or is left as
  * it was. */
-#include "image.h"
+#include "bench/report/image.h"
 
 #include <OpenEXR/openexr.h>
 #include <png.h>

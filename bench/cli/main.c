@@ -3,8 +3,8 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "../solvers/solver.h"
-#include "commands.h"
+#include "solvers/solver.h"
+#include "bench/cli/commands.h"
 
 static void print_usage(FILE *f)
 {

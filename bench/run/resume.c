@@ -1,5 +1,5 @@
 /* Checkpoint files (resume.h). */
-#include "resume.h"
+#include "bench/run/resume.h"
 
 #include <errno.h>
 #include <inttypes.h>
@@ -7,7 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "plot.h"
+#include "bench/report/plot.h"
 
 #define MAGIC_LINE "radpt-checkpoint"
 

@@ -9,9 +9,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../geometry/raycast.h"
-#include "../geometry/scene.h"
-#include "../geometry/status.h"
+#include "geometry/raycast.h"
+#include "geometry/scene.h"
+#include "geometry/status.h"
 
 /* Casts nrays rays with rp_ray_closest_from over `threads` OpenMP threads
  * (<= 0: all available) and stores nrays / (seconds spent casting) in

@@ -15,14 +15,15 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../geometry/mesh.h"
-#include "../geometry/scene.h"
-#include "../solvers/radiosity/system.h"
-#include "cli.h"
-#include "exp_internal.h"
-#include "harness.h"
-#include "plot.h"
-#include "reference.h"
+#include "geometry/mesh.h"
+#include "geometry/scene.h"
+#include "solvers/radiosity/system.h"
+#include "bench/report/files.h"
+#include "bench/run/load.h"
+#include "bench/experiments/exp_internal.h"
+#include "bench/run/harness.h"
+#include "bench/report/plot.h"
+#include "bench/run/reference.h"
 
 typedef struct real_scene {
     const char *id;    /* output subdirectory */
@@ -406,7 +407,7 @@ static rp_status run_scene(const rp_experiment_params *p, const real_scene *rs, 
     if (st != RP_OK)
         return st;
     rp_scene *scene = NULL;
-    if ((st = rp_cli_load_scene(path, NULL, 1, &scene, err)) != RP_OK)
+    if ((st = rp_load_scene(path, NULL, 1, &scene, err)) != RP_OK)
         return st;
     rp_exp_log(p, "realscenes: %s (%zu faces)", rs->id, rp_scene_nfaces(scene));
     const double budget = p->budget > 0 ? p->budget : (p->quick ? 8.0 : 60.0);

@@ -10,13 +10,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../geometry/scene.h"
-#include "../solvers/solver.h"
-#include "cli.h"
-#include "commands.h"
-#include "image.h"
-#include "resume.h"
-#include "spectrum.h"
+#include "geometry/scene.h"
+#include "solvers/solver.h"
+#include "bench/cli/cli.h"
+#include "bench/cli/commands.h"
+#include "bench/report/image.h"
+#include "bench/run/resume.h"
+#include "bench/report/spectrum.h"
 
 /* SIGINT / SIGTERM stop a run.  The flag is the solver's cancellation flag
  * (rp_options.cancel), polled inside set-up and steps: a method stopped
@@ -320,7 +320,7 @@ int rp_cmd_render(int argc, char **argv)
     rp_solver *solver = NULL;
     image_planes planes = {0};
     float *radiance = NULL;
-    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
+    rp_status st = rp_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     if (st != RP_OK)
         goto done;
     const rp_camera *cam = rp_scene_camera(scene);
@@ -473,7 +473,7 @@ int rp_cmd_probe(int argc, char **argv)
     rp_solver *solver = NULL;
     double *mean = NULL, *se = NULL;
     rp_cli_catch_signals(on_signal);
-    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 0, &scene, &err);
+    rp_status st = rp_load_scene(cli.scene, cli.camera, 0, &scene, &err);
     if (st != RP_OK)
         goto done;
     rp_options opts;

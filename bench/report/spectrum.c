@@ -1,4 +1,4 @@
-#include "spectrum.h"
+#include "bench/report/spectrum.h"
 
 #include <math.h>
 

@@ -4,11 +4,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-#include "../geometry/default_camera.h"
-#include "../geometry/mesh.h"
-#include "../geometry/scene.h"
-#include "cli.h"
-#include "commands.h"
+#include "geometry/default_camera.h"
+#include "geometry/mesh.h"
+#include "geometry/scene.h"
+#include "bench/cli/cli.h"
+#include "bench/cli/commands.h"
 
 static const char *band_kind_name(rp_band_kind k)
 {
@@ -198,7 +198,7 @@ int rp_cmd_info(int argc, char **argv)
         return rc;
     rp_error err;
     rp_scene *scene = NULL;
-    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 0, &scene, &err);
+    rp_status st = rp_load_scene(cli.scene, cli.camera, 0, &scene, &err);
     if (st != RP_OK)
         return rp_cli_fail(st, &err);
     int closed = rp_scene_is_closed(scene);

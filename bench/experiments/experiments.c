@@ -1,5 +1,5 @@
 /* Named experiments (experiments.h). */
-#include "experiments.h"
+#include "bench/experiments/experiments.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -9,16 +9,17 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "../geometry/mesh.h"
-#include "../geometry/raycast.h"
-#include "../geometry/scene.h"
-#include "../solvers/radiosity/formfactor.h"
-#include "../solvers/radiosity/hierarchical.h"
-#include "metrics.h"
-#include "cli.h"
-#include "harness.h"
-#include "plot.h"
-#include "exp_internal.h"
+#include "geometry/mesh.h"
+#include "geometry/raycast.h"
+#include "geometry/scene.h"
+#include "solvers/radiosity/formfactor.h"
+#include "solvers/radiosity/hierarchical.h"
+#include "bench/run/metrics.h"
+#include "bench/report/files.h"
+#include "bench/run/clock.h"
+#include "bench/run/harness.h"
+#include "bench/report/plot.h"
+#include "bench/experiments/exp_internal.h"
 
 /* ------------------------------------------------------------- helpers */
 

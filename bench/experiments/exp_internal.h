@@ -3,8 +3,8 @@
 #ifndef RP_EXP_INTERNAL_H
 #define RP_EXP_INTERNAL_H
 
-#include "../geometry/status.h"
-#include "experiments.h"
+#include "geometry/status.h"
+#include "bench/experiments/experiments.h"
 
 /* Howell's catalog C-11: parallel, directly opposed rectangles a x b at
  * distance c. */

@@ -32,9 +32,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../geometry/scene.h"
-#include "../geometry/status.h"
-#include "../solvers/solver.h"
+#include "geometry/scene.h"
+#include "geometry/status.h"
+#include "solvers/solver.h"
 
 typedef enum rp_reference_kind {
     RP_REFERENCE_EXACT,

@@ -1,5 +1,5 @@
 /* The benchmark harness (harness.h). */
-#include "harness.h"
+#include "bench/run/harness.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -8,7 +8,7 @@
 #include <sys/resource.h>
 #include <time.h>
 
-#include "cli.h"
+#include "bench/run/clock.h"
 
 /* ------------------------------------------------------------- specs */
 
@@ -130,44 +130,7 @@ static void spec_copy(rp_method_spec *dst, const rp_method_spec *src)
 
 /* ------------------------------------------------------------ clocks */
 
-double rp_cpu_clock(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
-static int hwm_reset_ok = -1;
-
-void rp_peak_rss_reset(void)
-{
-    FILE *f = fopen("/proc/self/clear_refs", "w");
-    int ok = 0;
-    if (f) {
-        ok = fputs("5", f) >= 0;
-        ok = (fclose(f) == 0) && ok;
-    }
-    hwm_reset_ok = ok;
-}
-
-double rp_peak_rss_mb(void)
-{
-    if (hwm_reset_ok == 1) {
-        FILE *f = fopen("/proc/self/status", "r");
-        char line[256];
-        double kb = -1;
-        while (f && fgets(line, sizeof line, f))
-            if (strncmp(line, "VmHWM:", 6) == 0)
-                kb = strtod(line + 6, NULL);
-        if (f)
-            fclose(f);
-        if (kb >= 0)
-            return kb / 1024.0;
-    }
-    struct rusage ru;
-    getrusage(RUSAGE_SELF, &ru);
-    return (double)ru.ru_maxrss / 1024.0; /* Linux: kilobytes */
-}
 
 /* --------------------------------------------------------------- run */
 

@@ -12,8 +12,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../geometry/status.h"
-#include "../solvers/solver.h"
+#include "geometry/status.h"
+#include "solvers/solver.h"
 
 #define RP_RESUME_FORMAT 1
 

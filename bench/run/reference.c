@@ -1,5 +1,5 @@
 /* References and their cache (reference.h). */
-#include "reference.h"
+#include "bench/run/reference.h"
 
 #include <errno.h>
 #include <inttypes.h>
@@ -9,13 +9,14 @@
 #include <string.h>
 #include <sys/stat.h>
 
-#include "../geometry/camera.h"
-#include "../geometry/raycast.h"
-#include "cli.h"
-#include "image.h"
-#include "metrics.h"
-#include "plot.h"
-#include "resume.h"
+#include "geometry/camera.h"
+#include "geometry/raycast.h"
+#include "bench/report/files.h"
+#include "bench/run/clock.h"
+#include "bench/report/image.h"
+#include "bench/run/metrics.h"
+#include "bench/report/plot.h"
+#include "bench/run/resume.h"
 
 /* Sub-pixel rays per side for the pixel mask. */
 #define MASK_SUB 4

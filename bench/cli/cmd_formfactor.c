@@ -17,12 +17,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../geometry/mesh.h"
-#include "../geometry/raycast.h"
-#include "../geometry/scene.h"
-#include "../solvers/radiosity/formfactor.h"
-#include "cli.h"
-#include "commands.h"
+#include "geometry/mesh.h"
+#include "geometry/raycast.h"
+#include "geometry/scene.h"
+#include "solvers/radiosity/formfactor.h"
+#include "bench/cli/cli.h"
+#include "bench/cli/commands.h"
 
 static int ff_usage(const char *fmt, const char *a)
 {
@@ -167,7 +167,7 @@ int rp_cmd_formfactor(int argc, char **argv)
     fp.tolerance = tolerance;
 
     rp_scene *scene = NULL;
-    if ((st = rp_cli_load_scene(scene_path, camera, 0, &scene, &err)) != RP_OK)
+    if ((st = rp_load_scene(scene_path, camera, 0, &scene, &err)) != RP_OK)
         return rp_cli_fail(st, &err);
     uint32_t sa = rp_scene_find_surface(scene, from), sb = rp_scene_find_surface(scene, to);
     if (sa == RP_NONE || sb == RP_NONE) {

@@ -14,12 +14,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../geometry/raycast.h"
-#include "../geometry/scene.h"
-#include "../solvers/solver.h"
-#include "cli.h"
-#include "commands.h"
-#include "raybench.h"
+#include "geometry/raycast.h"
+#include "geometry/scene.h"
+#include "solvers/solver.h"
+#include "bench/cli/cli.h"
+#include "bench/cli/commands.h"
+#include "bench/run/raybench.h"
 
 static int parse_count(const rp_cli *cli, const char *name, unsigned long fallback, unsigned long *out)
 {
@@ -90,7 +90,7 @@ int rp_cmd_throughput(int argc, char **argv)
     rp_scene *scene = NULL;
     rp_raycast *rc_ = NULL;
     float *image = NULL;
-    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
+    rp_status st = rp_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     if (st == RP_OK)
         st = rp_raycast_create(scene, NULL, &rc_, &err);
     double limit = 0;
@@ -150,7 +150,7 @@ int rp_cmd_samplers(int argc, char **argv)
     rp_error err;
     rp_scene *scene = NULL;
     float *ref = NULL, *img = NULL;
-    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
+    rp_status st = rp_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     const rp_camera *cam = scene ? rp_scene_camera(scene) : NULL;
     if (st == RP_OK && !cam)
         st = rp_error_set(&err, RP_ERR_INPUT, "%s: the scene has no camera", cli.scene);

@@ -21,16 +21,17 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../geometry/mesh.h"
-#include "../geometry/raycast.h"
-#include "../geometry/scene.h"
-#include "../solvers/radiosity/formfactor.h"
-#include "cli.h"
-#include "exp_internal.h"
-#include "harness.h"
-#include "image.h"
-#include "metrics.h"
-#include "plot.h"
+#include "geometry/mesh.h"
+#include "geometry/raycast.h"
+#include "geometry/scene.h"
+#include "solvers/radiosity/formfactor.h"
+#include "bench/report/files.h"
+#include "bench/run/clock.h"
+#include "bench/experiments/exp_internal.h"
+#include "bench/run/harness.h"
+#include "bench/report/image.h"
+#include "bench/run/metrics.h"
+#include "bench/report/plot.h"
 
 /* ------------------------------------------------------------- plumbing */
 

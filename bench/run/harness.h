@@ -23,10 +23,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../geometry/scene.h"
-#include "../solvers/solver.h"
-#include "metrics.h"
-#include "reference.h"
+#include "geometry/scene.h"
+#include "solvers/solver.h"
+#include "bench/run/clock.h"
+#include "bench/run/metrics.h"
+#include "bench/run/reference.h"
 
 #define RP_SPEC_MAX_OPTIONS 32
 
@@ -171,9 +172,5 @@ rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_r
 void rp_bench_summarise(rp_bench *b);
 void rp_bench_destroy(rp_bench *b);
 
-/* The peak-memory helpers (exposed for the tests). */
-void rp_peak_rss_reset(void);
-double rp_peak_rss_mb(void);
-double rp_cpu_clock(void);
 
 #endif

@@ -1,5 +1,5 @@
 /* Error metrics and log-log fits (metrics.h). */
-#include "metrics.h"
+#include "bench/run/metrics.h"
 
 #include <gsl/gsl_cdf.h>
 #include <gsl/gsl_fit.h>

@@ -6,9 +6,12 @@
 #include <stdint.h>
 #include <stdio.h>
 
-#include "../geometry/scene.h"
-#include "../geometry/status.h"
-#include "../solvers/solver.h"
+#include "geometry/scene.h"
+#include "geometry/status.h"
+#include "solvers/solver.h"
+#include "bench/report/files.h"
+#include "bench/run/clock.h"
+#include "bench/run/load.h"
 
 #define RP_CLI_MAX_OPTIONS 64
 
@@ -66,22 +69,7 @@ void rp_progress_begin(rp_progress *p, const char *label);
 void rp_progress_update(rp_progress *p, double fraction, const char *detail);
 void rp_progress_end(rp_progress *p);
 
-/* Monotonic wall clock, seconds. */
-double rp_clock(void);
 
-/* Writes s as a JSON string literal (with quotes). */
-void rp_json_string(FILE *f, const char *s);
-
-/* The one scene loader of every command: loads path (format 1 or .obj),
- * gives it the camera words of --camera when camera is not NULL (before
- * anything hashes the scene), prints each of the scene's warnings once on
- * stderr as "radpt: warning: FILE:LINE: ...", and, when need_camera is set
- * and the scene has no camera, sets the default camera (default_camera.h)
- * and prints it as the --camera words that give it back.  Bad --camera
- * words are RP_ERR_INPUT ("--camera: ..."), checked before the scene is
- * read. */
-rp_status rp_cli_load_scene(const char *path, const char *camera, int need_camera, rp_scene **out,
-                            rp_error *err);
 
 /* A name as a text column shows it: as is when it is a plain word, else
  * in double quotes with \" and \\ escaped and control characters as \xHH

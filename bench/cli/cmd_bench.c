@@ -18,13 +18,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../geometry/scene.h"
-#include "cli.h"
-#include "experiments.h"
-#include "harness.h"
-#include "image.h"
-#include "plot.h"
-#include "reference.h"
+#include "geometry/scene.h"
+#include "bench/cli/cli.h"
+#include "bench/experiments/experiments.h"
+#include "bench/run/harness.h"
+#include "bench/report/image.h"
+#include "bench/report/plot.h"
+#include "bench/run/reference.h"
 
 #define BENCH_DEFAULT_METHODS "pathtrace,southwell:elements=250,southwell:elements=1000"
 #define BENCH_DEFAULT_BUDGET 10.0
@@ -195,7 +195,7 @@ int rp_cmd_reference(int argc, char **argv)
     rp_error err;
     rp_scene *scene = NULL;
     rp_reference *ref = NULL;
-    rp_status st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
+    rp_status st = rp_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     if (st == RP_OK && rp.seed == 0 && seed_given(ac, av))
         st = rp_error_set(&err, RP_ERR_INPUT, "--seed 0 is not allowed for a reference");
     if (st == RP_OK)
@@ -319,7 +319,7 @@ int rp_cmd_bench(int argc, char **argv)
     rp_scene *scene = NULL;
     rp_reference *ref = NULL;
     rp_bench *bench = NULL;
-    st = rp_cli_load_scene(cli.scene, cli.camera, 1, &scene, &err);
+    st = rp_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     if (st == RP_OK) {
         rp_reference_params rp = {.size = sizeof rp, .spp = ref_spp, .samples = ref_samples,
                                   .threads = cli.threads, .cache_dir = rp_cli_extra(&cli, "cache"),

@@ -9,10 +9,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../geometry/status.h"
-#include "../solvers/solver.h"
-#include "image.h"
-#include "reference.h"
+#include "geometry/status.h"
+#include "solvers/solver.h"
+#include "bench/report/image.h"
+#include "bench/run/reference.h"
 
 typedef struct rp_experiment_params {
     size_t size;               /* sizeof(rp_experiment_params) */

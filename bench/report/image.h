@@ -8,7 +8,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../geometry/status.h"
+#include "geometry/status.h"
 
 typedef struct rp_image_attr {
     const char *name;   /* e.g. "radpt:method" */
