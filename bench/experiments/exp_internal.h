@@ -1,9 +1,15 @@
-/* Helpers shared by the experiment files of bench/ (experiments.c,
- * exp_stability.c); not a public interface. */
+/* Helpers shared by the experiment files of bench/experiments/ (one file
+ * per experiment, exp_NAME.c; experiments.c holds the registry and these
+ * helpers); not a public interface. */
 #ifndef RP_EXP_INTERNAL_H
 #define RP_EXP_INTERNAL_H
 
+#include <stdio.h>
+
 #include "geometry/status.h"
+#include "bench/report/plot.h"
+#include "bench/run/harness.h"
+#include "bench/run/reference.h"
 #include "bench/experiments/experiments.h"
 
 /* Howell's catalog C-11: parallel, directly opposed rectangles a x b at
@@ -23,6 +29,43 @@ void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
 /* Writes DIR/plots.gp from body (after the shared chart preamble) and runs
  * gnuplot on it; a missing gnuplot is a note (nn chars), not a failure. */
 rp_status rp_exp_draw(const rp_experiment_params *p, const char *body, char *note, size_t nn, rp_error *err);
+
+/* The path-traced references the Cornell experiments share (one cache
+ * entry each for the default and the quick size). */
+#define REF_SPP(p) ((p)->quick ? 256ul : 2048ul)
+
+/* Reference parameters for an experiment: spp, its threads, cache, log
+ * and progress. */
+rp_reference_params rp_exp_ref_params(const rp_experiment_params *p, unsigned long spp);
+
+/* Gets the scene's reference, runs a bench over a method list with
+ * checkpoints at budget x 2^-k, k < levels (budget in seconds or, with
+ * RP_SCHEDULE_ITERATIONS, in iterations) and writes the standard output
+ * into dir; bench_out and ref_out (may be NULL) receive the bench and the
+ * reference. */
+rp_status rp_exp_run_bench_scheduled(const rp_experiment_params *p, const rp_scene *scene, const char *scene_name,
+                                     const char *list, rp_schedule schedule, double budget, unsigned levels,
+                                     unsigned nseeds, unsigned long ref_spp, const rp_bench_output *out,
+                                     const char *dir, rp_bench **bench_out, rp_reference **ref_out, rp_error *err);
+/* rp_exp_run_bench_scheduled by time, 9 checkpoints. */
+rp_status rp_exp_run_bench(const rp_experiment_params *p, const rp_scene *scene, const char *scene_name,
+                           const char *list, double budget, unsigned nseeds, unsigned long ref_spp,
+                           const rp_bench_output *out, const char *dir, rp_bench **bench_out,
+                           rp_reference **ref_out, rp_error *err);
+
+/* A CSV number; not reached or not measured: an empty field. */
+void rp_exp_fnum(FILE *f, double v);
+/* The same in gnuplot data: "?" (the plots' `set datafile missing`). */
+void rp_exp_dnum(FILE *f, double v);
+
+/* The experiments, one file each. */
+rp_status rp_exp_cornell(const rp_experiment_params *p, rp_error *err);
+rp_status rp_exp_samplers(const rp_experiment_params *p, rp_error *err);
+rp_status rp_exp_furnace(const rp_experiment_params *p, rp_error *err);
+rp_status rp_exp_formfactors(const rp_experiment_params *p, rp_error *err);
+rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err);
+rp_status rp_exp_progressive(const rp_experiment_params *p, rp_error *err);
+rp_status rp_exp_hierarchy(const rp_experiment_params *p, rp_error *err);
 
 /* radpt experiment stability (exp_stability.c). */
 rp_status rp_exp_stability(const rp_experiment_params *p, rp_error *err);
