@@ -6,12 +6,14 @@
 #ifndef RP_EXPERIMENTS_H
 #define RP_EXPERIMENTS_H
 
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 
 #include "geometry/status.h"
 #include "solvers/solver.h"
 #include "bench/report/image.h"
+#include "bench/run/journal.h"
 #include "bench/run/reference.h"
 
 typedef struct rp_experiment_params {
@@ -29,6 +31,15 @@ typedef struct rp_experiment_params {
     rp_progress_fn progress;
     void *progress_ctx;
     const rp_exposure *exposure; /* --exposure for the PNGs; NULL: each chooses */
+    /* Set (by SIGINT / SIGTERM) to stop: experiments pass it to their runs
+     * (rp_options.cancel, rp_harness_params.cancel), stop between units of
+     * work, write what finished (report marked incomplete) and return
+     * RP_ERR_INTERRUPTED.  May be NULL. */
+    const atomic_int *cancel;
+    /* The study's journal in out_dir (may be NULL): each finished unit is
+     * recorded as it finishes, and units already recorded (--resume DIR)
+     * are read back instead of run again (journal.h). */
+    rp_journal *journal;
 } rp_experiment_params;
 
 typedef struct rp_experiment {
