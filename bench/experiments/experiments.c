@@ -179,24 +179,51 @@ void rp_exp_dnum(FILE *f, double v)
         fputc('?', f);
 }
 
+rp_status rp_experiment_setting_of(const rp_experiment_params *p, rp_experiment_setting *out, rp_error *err)
+{
+    if (!p->experiment)
+        return rp_error_set(err, RP_ERR_INPUT, "experiment parameters name no experiment");
+    *out = p->quick ? p->experiment->quick : p->experiment->full;
+    if (p->budget > 0)
+        out->budget = p->budget;
+    if (p->nseeds)
+        out->seeds = p->nseeds;
+    return RP_OK;
+}
+
 /* ------------------------------------------------------------- registry */
 
 static const rp_experiment experiments[] = {
-    {"cornell", "all methods at equal time on the Cornell box", rp_exp_cornell},
-    {"samplers", "random, stratified and Sobol' sampling: RMSE against spp and slopes", rp_exp_samplers},
-    {"furnace", "reflectance 0.1 to 0.99: sweeps and time to tolerance, iterative solvers and path tracer",
-     rp_exp_furnace},
-    {"formfactors", "analytic, Monte Carlo and hemicube form factors against Howell's closed forms",
-     rp_exp_formfactors},
-    {"meshing", "radiosity error against element size, observed order", rp_exp_meshing},
-    {"progressive", "progressive radiosity with and without ambient term and overshooting: error per shot",
-     rp_exp_progressive},
-    {"hierarchy", "hierarchical radiosity against the classic solvers, and links against leaves as bf-epsilon "
-                  "shrinks (when registered)", rp_exp_hierarchy},
-    {"stability", "the stability atlas: each method pushed past its comfort zone (reflectance near 1, tiny lights, "
-                  "corners, contact, shadows, thin geometry, non-physical input)", rp_exp_stability},
-    {"realscenes", "published OBJ/MTL scenes and scanned meshes: every method against the path tracer per "
-                   "surface, time and memory", rp_exp_realscenes},
+    {.name = "cornell",
+     .summary = "all methods at equal time on the Cornell box",
+     .run = rp_exp_cornell},
+    {.name = "samplers",
+     .summary = "random, stratified and Sobol' sampling: RMSE against spp and slopes",
+     .run = rp_exp_samplers},
+    {.name = "furnace",
+     .summary = "reflectance 0.1 to 0.99: sweeps and time to tolerance, iterative solvers and path tracer",
+     .run = rp_exp_furnace},
+    {.name = "formfactors",
+     .summary = "analytic, Monte Carlo and hemicube form factors against Howell's closed forms",
+     .run = rp_exp_formfactors},
+    {.name = "meshing",
+     .summary = "radiosity error against element size, observed order",
+     .run = rp_exp_meshing},
+    {.name = "progressive",
+     .summary = "progressive radiosity with and without ambient term and overshooting: error per shot",
+     .run = rp_exp_progressive},
+    {.name = "hierarchy",
+     .summary = "hierarchical radiosity against the classic solvers, and links against leaves as bf-epsilon "
+                  "shrinks (when registered)",
+     .run = rp_exp_hierarchy},
+    {.name = "stability",
+     .summary = "the stability atlas: each method pushed past its comfort zone (reflectance near 1, tiny lights, "
+                  "corners, contact, shadows, thin geometry, non-physical input)",
+     .run = rp_exp_stability},
+    {.name = "realscenes",
+     .summary = "published OBJ/MTL scenes and scanned meshes: every method against the path tracer per "
+                   "surface, time and memory",
+     .run = rp_exp_realscenes},
 };
 
 static const rp_experiment *const experiment_list[] = {&experiments[0], &experiments[1], &experiments[2],

@@ -40,11 +40,27 @@ typedef struct rp_experiment_params {
      * recorded as it finishes, and units already recorded (--resume DIR)
      * are read back instead of run again (journal.h). */
     rp_journal *journal;
+    /* The experiment being run (set by whoever runs it): its declared
+     * settings, see rp_experiment_setting_of. */
+    const struct rp_experiment *experiment;
 } rp_experiment_params;
 
+/* One size of an experiment (its --quick or its full form).  Zero / NULL
+ * fields do not apply to that experiment. */
+typedef struct rp_experiment_setting {
+    double budget;               /* seconds (or the experiment's unit) per run */
+    unsigned seeds;              /* seeds per Monte Carlo method */
+    unsigned long reference_spp; /* path-traced reference, samples per pixel */
+    const char *methods;         /* method list, "m[:opt=v...],..." */
+} rp_experiment_setting;
+
+/* An experiment, declared: what it runs and what its report checks. */
 typedef struct rp_experiment {
     const char *name;
-    const char *summary;
+    const char *summary;         /* one line */
+    const char *scenes;          /* scenes it runs on: files under scenes/, or what it builds */
+    const char *claim;           /* the claim its report checks in numbers (and its test) */
+    rp_experiment_setting quick, full;
     /* RP_ERR_UNSUPPORTED: the experiment cannot run here (e.g. its method
      * is not registered). */
     rp_status (*run)(const rp_experiment_params *p, rp_error *err);
@@ -53,6 +69,11 @@ typedef struct rp_experiment {
 /* NULL-terminated list, and look-up by name. */
 const rp_experiment *const *rp_experiments(void);
 const rp_experiment *rp_experiment_lookup(const char *name);
+
+/* The setting in force: p->experiment's quick or full one, with
+ * p->budget and p->nseeds (when non-zero) in place of its budget and
+ * seeds.  Into *out; RP_ERR_INPUT when p->experiment is NULL. */
+rp_status rp_experiment_setting_of(const rp_experiment_params *p, rp_experiment_setting *out, rp_error *err);
 
 /* Finds scenes/NAME: under p->scenes_dir if set, else ./scenes, else the
  * scenes directory next to the running binary. */
