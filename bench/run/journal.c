@@ -135,23 +135,15 @@ rp_status rp_journal_open(const char *dir, const char *identity, int resume, rp_
         st = load(j, identity, err);
         if (st == RP_OK) {
             /* a torn last record is dropped from the file by rewriting the
-             * records read, then appending goes on after them */
-            char tmp[1200];
-            snprintf(tmp, sizeof tmp, "%s.tmp.%ld", j->path, (long)getpid());
-            FILE *f = fopen(tmp, "w");
-            if (!f)
-                st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot write: %s", tmp, strerror(errno));
-            else {
-                fprintf(f, "%s\nidentity %s\n", JOURNAL_MAGIC, identity);
+             * records read (atomically, files.h), then appending goes on
+             * after them */
+            rp_out o;
+            st = rp_out_open(&o, j->path, err);
+            if (st == RP_OK) {
+                fprintf(o.f, "%s\nidentity %s\n", JOURNAL_MAGIC, identity);
                 for (size_t i = 0; i < j->n; i++)
-                    fprintf(f, "%s\t%s\n", j->rec[i].key, j->rec[i].payload);
-                int bad = ferror(f) != 0;
-                bad |= fflush(f) != 0 || fsync(fileno(f)) != 0;
-                bad |= fclose(f) != 0;
-                if (bad || rename(tmp, j->path) != 0) {
-                    unlink(tmp);
-                    st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot rewrite the journal", j->path);
-                }
+                    fprintf(o.f, "%s\t%s\n", j->rec[i].key, j->rec[i].payload);
+                st = rp_out_close(&o, 1, err);
             }
         }
         if (st == RP_OK && (j->fd = open(j->path, O_WRONLY | O_APPEND)) < 0)
