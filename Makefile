@@ -12,6 +12,9 @@ DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
                 libembree-dev libcgal-dev libcgal-demo libgmp-dev libmpfr-dev libcriterion-dev \
                 libpng-dev gnuplot-nox
 
+VERSION := 0.15.0
+GIT_DESCRIBE := $(shell git describe --always --dirty 2>/dev/null || echo unknown)
+
 CC  ?= gcc
 CXX ?= g++
 BUILD ?= build
@@ -71,6 +74,7 @@ $(BUILD)/%.o: %.cpp
 $(BUILD)/tests/run: $(TEST_OBJ) $(BUILD)/libradpt.a
 	$(CC) $(LDFLAGS) -o $@ $^ -lcriterion $(LDLIBS)
 
+$(BUILD)/bench/cli/main.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"' -DRP_GIT_DESCRIBE='"$(GIT_DESCRIBE)"'
 $(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"'
 
 meshes: $(MESHES)

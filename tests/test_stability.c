@@ -129,7 +129,7 @@ Test(stability, quick_atlas, .timeout = 240)
     cr_assert_not_null(e);
     char scenes[600];
     snprintf(scenes, sizeof scenes, "%s/scenes", RP_SOURCE_DIR);
-    rp_experiment_params p = {.size = sizeof p, .quick = 1, .out_dir = dir, .scenes_dir = scenes, .threads = 2,
+    rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = 1, .out_dir = dir, .scenes_dir = scenes, .threads = 2,
                               .log = nolog};
     rp_error err;
     rp_error_clear(&err);

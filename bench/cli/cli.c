@@ -3,6 +3,7 @@
 #include "geometry/default_camera.h"
 
 #include <errno.h>
+#include <stdarg.h>
 #include <math.h>
 #include <signal.h>
 #include <stdlib.h>
@@ -31,6 +32,74 @@ static int parse_u64(const char *s, uint64_t *out)
         return -1;
     *out = v;
     return 0;
+}
+
+/* The generic options each command takes (besides its own extras and its
+ * method's options); any other generic option is refused, not ignored. */
+static const struct {
+    const char *command;
+    const char *takes; /* space-separated, "o" for -o */
+} generic_options[] = {
+    {"info", "json camera quiet"},
+    {"render", "method o png camera seed threads time quiet"},
+    {"probe", "method surface-averages json camera seed threads time quiet"},
+    {"reference", "json camera seed threads quiet"},
+    {"bench", "o camera seed threads time quiet"},
+    {"experiment", "o threads quiet"},
+    {"throughput", "json camera seed threads quiet"},
+    {"samplers", "json camera seed threads quiet"},
+};
+
+/* 1 when command takes the generic option name (commands not in the
+ * table take them all). */
+static int takes_generic(const char *command, const char *name)
+{
+    for (size_t i = 0; i < sizeof generic_options / sizeof generic_options[0]; i++)
+        if (strcmp(generic_options[i].command, command) == 0) {
+            const char *t = generic_options[i].takes;
+            size_t n = strlen(name);
+            for (const char *w = t; *w;) {
+                size_t len = strcspn(w, " ");
+                if (len == n && strncmp(w, name, n) == 0)
+                    return 1;
+                w += len;
+                while (*w == ' ')
+                    w++;
+            }
+            return 0;
+        }
+    return 1;
+}
+
+static int not_applicable(const rp_cli *cli, const char *option)
+{
+    const char *takes = "";
+    for (size_t i = 0; i < sizeof generic_options / sizeof generic_options[0]; i++)
+        if (strcmp(generic_options[i].command, cli->command) == 0)
+            takes = generic_options[i].takes;
+    fprintf(stderr, "radpt %s: %s does not apply to %s (its common options:", cli->command, option, cli->command);
+    for (const char *w = takes; *w;) {
+        size_t len = strcspn(w, " ");
+        fprintf(stderr, " %s%.*s", len == 1 ? "-" : "--", (int)len, w);
+        w += len;
+        while (*w == ' ')
+            w++;
+    }
+    fprintf(stderr, "; see radpt help)\n");
+    return 2;
+}
+
+int rp_cli_quiet;
+
+void rp_cli_note(const char *fmt, ...)
+{
+    if (rp_cli_quiet)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fputc('\n', stderr);
 }
 
 static const rp_option_spec *method_option(const rp_solver_type *t, const char *name)
@@ -79,6 +148,8 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
             continue;
         }
         if (strcmp(a, "-o") == 0) {
+            if (!takes_generic(command, "o"))
+                return not_applicable(cli, "-o");
             if (i + 1 >= argc)
                 return usage(cli, "-o needs a file name%s", "");
             cli->out = argv[++i];
@@ -96,14 +167,24 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
         memcpy(name, a + 2, len);
         name[len] = '\0';
 
-        int is_flag = strcmp(name, "json") == 0 || strcmp(name, "surface-averages") == 0;
+        int is_flag = strcmp(name, "json") == 0 || strcmp(name, "surface-averages") == 0 ||
+                      strcmp(name, "quiet") == 0;
         const rp_option_spec *spec = method_option(type, name);
         if (spec && !spec->arg)
             is_flag = 1;
-        int known = is_flag || spec || !strcmp(name, "method") || !strcmp(name, "png") || !strcmp(name, "camera") ||
-                    !strcmp(name, "seed") || !strcmp(name, "threads") || !strcmp(name, "time");
+        int extra = 0;
         for (const char *const *e = allowed_extra; e && *e; e++)
-            known |= strcmp(*e, name) == 0;
+            extra |= strcmp(*e, name) == 0;
+        int generic = !spec && !extra &&
+                      (!strcmp(name, "json") || !strcmp(name, "surface-averages") || !strcmp(name, "quiet") ||
+                       !strcmp(name, "method") || !strcmp(name, "png") || !strcmp(name, "camera") ||
+                       !strcmp(name, "seed") || !strcmp(name, "threads") || !strcmp(name, "time"));
+        if (generic && !takes_generic(command, name)) {
+            char opt[80];
+            snprintf(opt, sizeof opt, "--%s", name);
+            return not_applicable(cli, opt);
+        }
+        int known = is_flag || spec || generic || extra;
         if (!known) {
             if (type)
                 fprintf(stderr, "radpt %s: method %s has no option '--%s' (see radpt help %s)\n", command,
@@ -130,6 +211,9 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
             /* found in the first pass */
         } else if (strcmp(name, "json") == 0) {
             cli->json = 1;
+        } else if (strcmp(name, "quiet") == 0) {
+            cli->quiet = 1;
+            rp_cli_quiet = 1;
         } else if (strcmp(name, "surface-averages") == 0) {
             cli->surface_averages = 1;
         } else if (strcmp(name, "png") == 0) {
@@ -165,6 +249,10 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
             cli->extra_values[cli->nextra++] = value;
         }
     }
+    if (!cli->scene && strcmp(command, "experiment") == 0) {
+        fprintf(stderr, "radpt experiment: needs an experiment NAME (radpt experiment --list shows them)\n");
+        return 2;
+    }
     if (!cli->scene)
         return usage(cli, "needs a scene file%s", "");
     if (wants_method && !cli->method)
@@ -196,7 +284,7 @@ void rp_progress_begin(rp_progress *p, const char *label)
 
 void rp_progress_update(rp_progress *p, double fraction, const char *detail)
 {
-    if (!p->tty)
+    if (!p->tty || rp_cli_quiet)
         return;
     double now = rp_clock();
     if (now - p->last < 0.1 && fraction < 1)
@@ -216,7 +304,7 @@ void rp_progress_update(rp_progress *p, double fraction, const char *detail)
 
 void rp_progress_end(rp_progress *p)
 {
-    if (p->tty && p->last >= 0)
+    if (p->tty && p->last >= 0 && !rp_cli_quiet)
         fputc('\n', stderr);
 }
 

@@ -26,6 +26,7 @@ typedef struct rp_cli {
     int threads;
     double time_budget;        /* --time, seconds; 0 = none */
     int json;
+    int quiet;                 /* --quiet: no progress or log lines */
     int surface_averages;
     /* method options, passed through to the solver */
     const char *keys[RP_CLI_MAX_OPTIONS];
@@ -58,6 +59,17 @@ int rp_cli_check_output(const char *command, const char *option, const char *pat
 
 /* Prints "radpt: message" for an error and returns its exit code. */
 int rp_cli_fail(rp_status st, const rp_error *err);
+
+/* Set by --quiet: progress bars and log lines are not shown (warnings and
+ * errors still are). */
+extern int rp_cli_quiet;
+
+/* A log line on stderr (a newline is added), unless --quiet. */
+void rp_cli_note(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2)))
+#endif
+    ;
 
 /* Progress on stderr, a bar only when stderr is a terminal. */
 typedef struct rp_progress {

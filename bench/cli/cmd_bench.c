@@ -42,7 +42,7 @@ static void front_log(void *ctx, const char *msg)
         rp_progress_end(&fr->bar);
         fr->bar_open = 0;
     }
-    fprintf(stderr, "%s\n", msg);
+    rp_cli_note("%s", msg);
 }
 
 static void front_progress(void *ctx, double fraction, const char *detail)
@@ -373,10 +373,6 @@ int rp_cmd_experiment(int argc, char **argv)
     int ac = strip_flags(argc, argv, av, flags, found);
     rp_cli cli = {.command = "experiment"};
     int rc = rp_cli_parse(&cli, ac, av, extra, 0);
-    if (!rc && cli.camera) {
-        fprintf(stderr, "radpt experiment: takes no --camera (each experiment's scenes have their own; see radpt help)\n");
-        rc = 2;
-    }
     unsigned long seeds = 0;
     double budget = 0;
     if (!rc)
@@ -408,14 +404,14 @@ int rp_cmd_experiment(int argc, char **argv)
     char cmd[2048];
     command_line(argc, argv, cmd, sizeof cmd);
     front fr = {0};
-    rp_experiment_params p = {.size = sizeof p, .quick = found[0], .out_dir = cli.out,
+    rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = found[0], .out_dir = cli.out,
                               .cache_dir = rp_cli_extra(&cli, "cache"), .scenes_dir = rp_cli_extra(&cli, "scenes"),
                               .threads = cli.threads, .budget = budget, .nseeds = (unsigned)seeds, .command = cmd,
                               .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr,
                               .exposure = rp_cli_extra(&cli, "exposure") ? &exposure : NULL};
     rp_error err;
     rp_error_clear(&err);
-    fprintf(stderr, "experiment %s%s: %s\n", e->name, p.quick ? " (quick)" : "", e->summary);
+    rp_cli_note("experiment %s%s: %s", e->name, p.quick ? " (quick)" : "", e->summary);
     rp_status st = e->run(&p, &err);
     front_done(&fr);
     if (st == RP_OK)

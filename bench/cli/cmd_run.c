@@ -138,7 +138,7 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
 static void stderr_log(void *ctx, const char *message)
 {
     (void)ctx;
-    fprintf(stderr, "radpt: %s\n", message);
+    rp_cli_note("radpt: %s", message);
 }
 
 static void fill_options(rp_options *o, const rp_cli *cli, unsigned want)

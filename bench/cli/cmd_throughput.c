@@ -95,7 +95,7 @@ int rp_cmd_throughput(int argc, char **argv)
         st = rp_raycast_create(scene, NULL, &rc_, &err);
     double limit = 0;
     if (st == RP_OK) {
-        fprintf(stderr, "casting %lu random rays...\n", nrays);
+        rp_cli_note("casting %lu random rays...", nrays);
         st = rp_raybench_run(scene, rc_, nrays, cli.threads, cli.seed, &limit, &err);
     }
     const rp_camera *cam = scene ? rp_scene_camera(scene) : NULL;
@@ -108,7 +108,7 @@ int rp_cmd_throughput(int argc, char **argv)
             st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory");
     }
     if (st == RP_OK) {
-        fprintf(stderr, "path tracing %lu spp...\n", spp);
+        rp_cli_note("path tracing %lu spp...", spp);
         st = render(scene, "sobol", spp, 0, cli.seed, cli.threads, image, &rays, &paths, &seconds,
                     &samples, &err);
     }
@@ -163,7 +163,7 @@ int rp_cmd_samplers(int argc, char **argv)
     }
     double rays, paths, secs, samples, ref_secs = 0;
     if (st == RP_OK) {
-        fprintf(stderr, "reference: sobol, %lu spp...\n", ref_spp);
+        rp_cli_note("reference: sobol, %lu spp...", ref_spp);
         /* a seed no run below uses */
         st = render(scene, "sobol", ref_spp, 0, cli.seed + 1000003, cli.threads, ref, &rays, &paths,
                     &ref_secs, &samples, &err);
@@ -186,7 +186,7 @@ int rp_cmd_samplers(int argc, char **argv)
     for (int k = 0; k < 3 && st == RP_OK; k++) {
         double sum = 0, sum2 = 0, mse_sum = 0, sec_sum = 0;
         for (unsigned long s = 0; s < nseeds && st == RP_OK; s++) {
-            fprintf(stderr, "%s, seed %lu...\n", names[k], cli.seed + s);
+            rp_cli_note("%s, seed %lu...", names[k], cli.seed + s);
             st = render(scene, names[k], spp, 0, cli.seed + s, cli.threads, img, &rays, &paths, &secs,
                         &samples, &err);
             double se = 0;

@@ -5,6 +5,14 @@
 
 #include "solvers/solver.h"
 #include "bench/cli/commands.h"
+#include "bench/experiments/experiments.h"
+
+#ifndef RP_VERSION
+#define RP_VERSION "unknown"
+#endif
+#ifndef RP_GIT_DESCRIBE
+#define RP_GIT_DESCRIBE "unknown"
+#endif
 
 static void print_usage(FILE *f)
 {
@@ -39,9 +47,9 @@ static void print_usage(FILE *f)
           "      images: the reference's automatic one, or --exposure EV)\n"
           "  radpt experiment NAME [--quick] -o DIR [--budget SECONDS] [--seeds N] [--cache DIR]\n"
           "               [--exposure EV]\n"
-          "      cornell, samplers, furnace, formfactors, meshing, progressive, hierarchy,\n"
-          "      stability, realscenes (published OBJ/MTL scenes: every method against the\n"
-          "      path tracer per surface, time and memory)\n"
+          "  radpt experiment --list\n"
+          "      a named study that ends in DIR/report.md with its charts (list below;\n"
+          "      radpt help experiment NAME says what it runs and what it checks)\n"
           "  radpt formfactor SCENE --from S --to S [--method analytic|montecarlo|hemicube]\n"
           "               [--samples N] [--resolution R] [--rays N] [--tolerance T]\n"
           "               [--elements N | --max-edge L] [--seed S] [--threads T] [--json]\n"
@@ -52,8 +60,9 @@ static void print_usage(FILE *f)
           "  radpt samplers SCENE [--spp N] [--seeds N] [--reference-spp N] [--json]\n"
           "      random, stratified and Sobol' sampling: RMSE against a reference rendered\n"
           "      with another seed, and MSE x seconds, which ranks them at equal time\n"
-          "  radpt help [METHOD]\n"
-          "      this text, or a method's options\n"
+          "  radpt help [METHOD | experiment NAME]\n"
+          "      this text, a method's options, or what an experiment runs and checks\n"
+          "  radpt --version\n"
           "\n"
           "SCENE is a scene file (format 1, see README.md) or a Wavefront .obj with its .mtl.\n"
           "Every command reading SCENE takes --camera \"eye X Y Z look X Y Z up X Y Z fov F size W H\"\n"
@@ -62,10 +71,35 @@ static void print_usage(FILE *f)
           "What reading drops or ignores is printed as 'radpt: warning: FILE:LINE: ...'.\n"
           "--time stops a run after SECONDS; without it a method stops by its own rule\n"
           "(e.g. --spp for pathtrace). --seed defaults to 1, --threads to all cores.\n"
+          "Options a command does not take are refused (exit 2). --quiet: no progress or log lines.\n"
           "Exit status: 0 success, 1 runtime failure, 2 bad input or usage.\n\nmethods:\n",
           f);
     for (const rp_solver_type *const *t = rp_solver_types(); *t; t++)
         fprintf(f, "  %-18s %s\n", (*t)->name, (*t)->summary);
+    fputs("\nexperiments:\n", f);
+    for (const rp_experiment *const *e = rp_experiments(); *e; e++)
+        fprintf(f, "  %-18s %s\n", (*e)->name, (*e)->summary);
+}
+
+static void list_experiments(FILE *f)
+{
+    for (const rp_experiment *const *e = rp_experiments(); *e; e++)
+        fprintf(f, "%-14s %s\n", (*e)->name, (*e)->summary);
+}
+
+static int print_experiment(const char *name)
+{
+    const rp_experiment *e = name ? rp_experiment_lookup(name) : NULL;
+    if (!e) {
+        fprintf(stderr, "radpt help experiment: %s%s%s; known experiments:", name ? "unknown experiment '" : "needs a NAME",
+                name ? name : "", name ? "'" : "");
+        for (const rp_experiment *const *k = rp_experiments(); *k; k++)
+            fprintf(stderr, " %s", (*k)->name);
+        fprintf(stderr, "\n");
+        return 2;
+    }
+    rp_experiment_describe(e, stdout);
+    return 0;
 }
 
 static int print_method(const char *name)
@@ -95,14 +129,24 @@ int main(int argc, char **argv)
     gsl_set_error_handler_off();
     if (argc < 2) {
         fprintf(stderr, "radpt: no command; usage: radpt info|render|probe|reference|bench|experiment|"
-                        "formfactor|throughput|samplers|help ... (see radpt help)\n");
+                        "formfactor|throughput|samplers|help|--version ... (see radpt help)\n");
         return 2;
     }
     const char *cmd = argv[1];
+    if (!strcmp(cmd, "--version") || !strcmp(cmd, "version")) {
+        printf("radpt %s (git %s)\n", RP_VERSION, RP_GIT_DESCRIBE);
+        return 0;
+    }
     if (!strcmp(cmd, "help") || !strcmp(cmd, "--help") || !strcmp(cmd, "-h")) {
+        if (argc > 2 && !strcmp(argv[2], "experiment"))
+            return print_experiment(argc > 3 ? argv[3] : NULL);
         if (argc > 2)
             return print_method(argv[2]);
         print_usage(stdout);
+        return 0;
+    }
+    if (!strcmp(cmd, "experiment") && argc == 3 && !strcmp(argv[2], "--list")) {
+        list_experiments(stdout);
         return 0;
     }
     for (int i = 2; i < argc; i++)

@@ -95,7 +95,11 @@ rp_status rp_exp_furnace(const rp_experiment_params *p, rp_error *err)
     const double *rhos = p->quick ? rhos_quick : rhos_full;
     size_t nrho = p->quick ? 3 : 7;
     const double tol = p->quick ? 1e-2 : 1e-3;
-    const double budget = p->budget > 0 ? p->budget : (p->quick ? 2.0 : 20.0);
+    rp_experiment_setting set;
+    rp_status st0 = rp_experiment_setting_of(p, &set, err);
+    if (st0 != RP_OK)
+        return st0;
+    const double budget = set.budget;
     /* exact form factors matter here: a row-sum error d moves the answer by
      * about rho d / (1 - rho), which at rho = 0.99 is 100 d */
     static const char *const specs[] = {"jacobi:elements=150:ff-tolerance=1e-8",

@@ -260,21 +260,22 @@ rp_status rp_exp_hierarchy(const rp_experiment_params *p, rp_error *err)
                             "experiment hierarchy: the method 'hierarchical' is not registered in this build; "
                             "not available");
     char path[1024];
-    rp_status st = rp_experiment_scene_path(p, "cornell.scene", path, sizeof path, err);
+    rp_scene *scene = NULL;
+    rp_experiment_setting set;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
     if (st != RP_OK)
         return st;
-    rp_scene *scene = NULL;
-    if ((st = rp_scene_load(path, &scene, err)) != RP_OK)
-        return st;
-    double budget = p->budget > 0 ? p->budget : (p->quick ? 2.0 : 20.0);
-    const char *list = p->quick ? "hierarchical,gauss-seidel:elements=250"
-                                : "hierarchical,gauss-seidel:elements=1000,southwell:elements=1000";
+    char methods[1024], preface[1600];
+    rp_exp_describe_methods(set.methods, methods, sizeof methods);
+    snprintf(preface, sizeof preface,
+             "Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991) against the classic solvers at equal "
+             "time (%g s per run) on the Cornell box: %s.",
+             set.budget, methods);
     rp_bench_output out = {.size = sizeof out, .title = "Experiment hierarchy: hierarchical radiosity",
-                           .preface = "Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991) against the "
-                                      "classic solvers at equal time on the Cornell box.",
-                           .sheet = 1, .command = p->command};
+                           .preface = preface, .sheet = 1, .command = p->command};
     rp_reference *ref = NULL;
-    st = rp_exp_run_bench(p, scene, path, list, budget, 1, REF_SPP(p), &out, p->out_dir, NULL, &ref, err);
+    st = rp_exp_run_bench(p, scene, path, set.methods, set.budget, 1, set.reference_spp, &out, p->out_dir, NULL,
+                          &ref, err);
     if (st == RP_OK)
         st = hierarchy_form_factors(p, scene, ref, err);
     if (st == RP_OK)

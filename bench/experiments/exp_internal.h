@@ -30,9 +30,17 @@ void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
  * gnuplot on it; a missing gnuplot is a note (nn chars), not a failure. */
 rp_status rp_exp_draw(const rp_experiment_params *p, const char *body, char *note, size_t nn, rp_error *err);
 
-/* The path-traced references the Cornell experiments share (one cache
- * entry each for the default and the quick size). */
-#define REF_SPP(p) ((p)->quick ? 256ul : 2048ul)
+/* The start every experiment shares: the setting in force (the declared
+ * quick or full one, with --budget / --seeds) into *set, and, when
+ * scene_file is not NULL, scenes/scene_file found (path, n) and loaded
+ * into *scene (warnings printed, default camera where it has none). */
+rp_status rp_exp_begin(const rp_experiment_params *p, const char *scene_file, rp_scene **scene, char *path,
+                       size_t n, rp_experiment_setting *set, rp_error *err);
+
+/* What a method list runs, for report texts generated from what ran:
+ * "pathtrace (sampler=random, defaults); southwell (elements=250,
+ * elements=1000); hierarchical". */
+void rp_exp_describe_methods(const char *list, char *out, size_t n);
 
 /* Reference parameters for an experiment: spp, its threads, cache, log
  * and progress. */

@@ -26,11 +26,10 @@
 rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
 {
     char path[1024];
-    rp_status st = rp_experiment_scene_path(p, "cornell.scene", path, sizeof path, err);
-    if (st != RP_OK)
-        return st;
     rp_scene *scene = NULL;
-    if ((st = rp_scene_load(path, &scene, err)) != RP_OK)
+    rp_experiment_setting set;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
+    if (st != RP_OK)
         return st;
     /* below about 150 elements the Cornell box's 27 surfaces get one or two
      * elements each and the error is not yet in its asymptotic regime */
@@ -39,9 +38,9 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
     const unsigned *counts = p->quick ? counts_quick : counts_full;
     size_t nc = p->quick ? 3 : 5;
     static const char *const recon[2] = {"flat", "gouraud"};
-    const double budget = p->budget > 0 ? p->budget : (p->quick ? 20.0 : 300.0);
+    const double budget = set.budget;
     rp_reference *ref = NULL;
-    rp_reference_params rp = rp_exp_ref_params(p, REF_SPP(p));
+    rp_reference_params rp = rp_exp_ref_params(p, set.reference_spp);
     st = rp_reference_get(scene, path, &rp, &ref, err);
     const double area = rp_scene_total_area(scene);
     typedef struct mrow {

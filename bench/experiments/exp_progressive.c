@@ -26,34 +26,27 @@
 rp_status rp_exp_progressive(const rp_experiment_params *p, rp_error *err)
 {
     char path[1024];
-    rp_status st = rp_experiment_scene_path(p, "cornell.scene", path, sizeof path, err);
+    rp_scene *scene = NULL;
+    rp_experiment_setting set;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
     if (st != RP_OK)
         return st;
-    rp_scene *scene = NULL;
-    if ((st = rp_scene_load(path, &scene, err)) != RP_OK)
-        return st;
-    unsigned elements = p->quick ? 150 : 500;
-    double shots = p->budget > 0 ? p->budget : (p->quick ? 300 : 4000);
-    char list[512];
-    snprintf(list, sizeof list,
-             "southwell:elements=%u,southwell:elements=%u:ambient,southwell:elements=%u:overshoot=1.5,"
-             "southwell:elements=%u:ambient:overshoot=1.5",
-             elements, elements, elements, elements);
-    char preface[1200];
+    char methods[1024];
+    rp_exp_describe_methods(set.methods, methods, sizeof methods);
+    char preface[1600];
     snprintf(preface, sizeof preface,
-             "Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988) on the Cornell box with "
-             "%u elements, checkpoints every doubling of the number of shots up to %g: classic shooting, with "
-             "the ambient term shown (unshot power spread uniformly, sec. 4 of the paper), with overshooting "
-             "(1.5 x the unshot radiosity), and both. The ambient term makes early images close to the answer "
-             "in the mean; overshooting speeds the convergence of the residual. The chart against samples is "
-             "the error per shot (samples = shots here).",
-             elements, shots);
+             "Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988) on the Cornell box, "
+             "checkpoints every doubling of the number of shots up to %g: %s. `ambient` shows the ambient term "
+             "(unshot power spread uniformly, sec. 4 of the paper), `overshoot` shoots more than the unshot "
+             "radiosity. The ambient term makes early images close to the answer in the mean; overshooting "
+             "speeds the convergence of the residual. The chart against samples is the error per shot "
+             "(samples = shots here).",
+             set.budget, methods);
     rp_bench_output out = {.size = sizeof out, .title = "Experiment progressive: error per shot",
                            .preface = preface, .samples_chart = 1, .samples_label = "shots",
                            .sheet = 1, .command = p->command};
-    st = rp_exp_run_bench_scheduled(p, scene, path, list, RP_SCHEDULE_ITERATIONS, shots, 10, 1, REF_SPP(p), &out,
-                             p->out_dir, NULL, NULL, err);
+    st = rp_exp_run_bench_scheduled(p, scene, path, set.methods, RP_SCHEDULE_ITERATIONS, set.budget, 10, 1,
+                                    set.reference_spp, &out, p->out_dir, NULL, NULL, err);
     rp_scene_destroy(scene);
     return st;
 }
-

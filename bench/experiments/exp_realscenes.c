@@ -410,8 +410,13 @@ static rp_status run_scene(const rp_experiment_params *p, const real_scene *rs, 
     if ((st = rp_load_scene(path, NULL, 1, &scene, err)) != RP_OK)
         return st;
     rp_exp_log(p, "realscenes: %s (%zu faces)", rs->id, rp_scene_nfaces(scene));
-    const double budget = p->budget > 0 ? p->budget : (p->quick ? 8.0 : 60.0);
-    rp_reference_params rp = {.size = sizeof rp, .spp = p->quick ? 16 : 256, .samples = p->quick ? 4096 : 65536,
+    rp_experiment_setting set;
+    if ((st = rp_experiment_setting_of(p, &set, err)) != RP_OK) {
+        rp_scene_destroy(scene);
+        return st;
+    }
+    const double budget = set.budget;
+    rp_reference_params rp = {.size = sizeof rp, .spp = set.reference_spp, .samples = p->quick ? 4096 : 65536,
                               .threads = p->threads, .cache_dir = p->cache_dir, .log = p->log, .log_ctx = p->log_ctx,
                               .progress = p->progress, .progress_ctx = p->progress_ctx};
     rp_reference *ref = NULL;

@@ -26,29 +26,24 @@
 rp_status rp_exp_samplers(const rp_experiment_params *p, rp_error *err)
 {
     char path[1024];
-    rp_status st = rp_experiment_scene_path(p, "cornell.scene", path, sizeof path, err);
+    rp_scene *scene = NULL;
+    rp_experiment_setting set;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
     if (st != RP_OK)
         return st;
-    rp_scene *scene = NULL;
-    if ((st = rp_scene_load(path, &scene, err)) != RP_OK)
-        return st;
-    double budget = p->budget > 0 ? p->budget : (p->quick ? 1.0 : 10.0);
-    unsigned seeds = p->nseeds ? p->nseeds : (p->quick ? 2 : 3);
-    unsigned long ref_spp = REF_SPP(p);
-    const char *list = "pathtrace:sampler=random,pathtrace:sampler=stratified,pathtrace:sampler=sobol";
     char preface[1200];
     snprintf(preface, sizeof preface,
              "The path tracer's three samplers on the Cornell box, %g s per run, %u seeds: independent "
              "uniform numbers (random), a jittered grid per pair of dimensions (stratified) and Owen-scrambled "
              "Sobol' points. Plain Monte Carlo error falls as N^-1/2 (slope -0.5 against samples); "
-             "stratification and scrambled Sobol' do better where the integrand is smooth (data/ground-truth.md: "
+             "stratification and scrambled Sobol' do better where the integrand is smooth (docs/ground-truth.md: "
              "about N^-0.75 where visibility edges cross a pixel), less so for the many-dimensional indirect "
              "light. Slopes are fitted against samples per pixel (all rows of all seeds).",
-             budget, seeds);
+             set.budget, set.seeds);
     rp_bench_output out = {.size = sizeof out, .title = "Experiment samplers: random, stratified and Sobol'",
                            .preface = preface, .samples_chart = 1, .sheet = 1, .command = p->command};
-    st = rp_exp_run_bench(p, scene, path, list, budget, seeds, ref_spp, &out, p->out_dir, NULL, NULL, err);
+    st = rp_exp_run_bench(p, scene, path, set.methods, set.budget, set.seeds, set.reference_spp, &out, p->out_dir,
+                          NULL, NULL, err);
     rp_scene_destroy(scene);
     return st;
 }
-

@@ -21,6 +21,7 @@
 #include "bench/run/harness.h"
 #include "bench/report/plot.h"
 #include "bench/experiments/exp_internal.h"
+#include "bench/run/load.h"
 
 /* ------------------------------------------------------------- helpers */
 
@@ -179,6 +180,80 @@ void rp_exp_dnum(FILE *f, double v)
         fputc('?', f);
 }
 
+rp_status rp_exp_begin(const rp_experiment_params *p, const char *scene_file, rp_scene **scene, char *path,
+                       size_t n, rp_experiment_setting *set, rp_error *err)
+{
+    *scene = NULL;
+    rp_status st = rp_experiment_setting_of(p, set, err);
+    if (st == RP_OK && scene_file)
+        st = rp_experiment_scene_path(p, scene_file, path, n, err);
+    if (st == RP_OK && scene_file)
+        st = rp_load_scene(path, NULL, 1, scene, err);
+    return st;
+}
+
+void rp_exp_describe_methods(const char *list, char *out, size_t n)
+{
+    out[0] = '\0';
+    rp_method_spec *m = NULL;
+    size_t count = 0, used = 0;
+    rp_error err;
+    if (rp_method_list_parse(list, &m, &count, &err) != RP_OK)
+        return;
+    for (size_t i = 0; i < count && used < n; i++) {
+        /* methods in list order, each with the variants (options) it runs */
+        size_t first = i;
+        for (size_t k = 0; k < i; k++)
+            if (strcmp(m[k].name, m[i].name) == 0)
+                first = k;
+        if (first != i)
+            continue;
+        size_t variants = 0;
+        for (size_t k = i; k < count; k++)
+            variants += strcmp(m[k].name, m[i].name) == 0;
+        used += (size_t)snprintf(out + used, n - used, "%s%s", used ? "; " : "", m[i].name);
+        if (variants > 1 || m[i].count) {
+            used += (size_t)snprintf(out + used, used < n ? n - used : 0, " (");
+            size_t shown = 0;
+            for (size_t k = i; k < count && used < n; k++) {
+                if (strcmp(m[k].name, m[i].name) != 0)
+                    continue;
+                const char *colon = strchr(m[k].text, ':');
+                used += (size_t)snprintf(out + used, used < n ? n - used : 0, "%s%s", shown++ ? ", " : "",
+                                         colon ? colon + 1 : "defaults");
+            }
+            used += (size_t)snprintf(out + used, used < n ? n - used : 0, ")");
+        }
+    }
+    free(m);
+}
+
+static void describe_setting(FILE *f, const char *label, const rp_experiment_setting *s, const char *unit)
+{
+    fprintf(f, "%s:", label);
+    if (s->budget > 0)
+        fprintf(f, " %g %s per run;", s->budget, unit ? unit : "s");
+    if (s->seeds)
+        fprintf(f, " %u seeds per Monte Carlo method;", s->seeds);
+    if (s->reference_spp)
+        fprintf(f, " reference %lu spp;", s->reference_spp);
+    if (s->methods)
+        fprintf(f, " methods %s", s->methods);
+    fputc('\n', f);
+}
+
+void rp_experiment_describe(const rp_experiment *e, FILE *f)
+{
+    fprintf(f, "experiment %s: %s\n", e->name, e->summary);
+    if (e->scenes)
+        fprintf(f, "scenes: %s\n", e->scenes);
+    if (e->claim)
+        fprintf(f, "claim checked: %s\n", e->claim);
+    describe_setting(f, "full", &e->full, e->budget_unit);
+    describe_setting(f, "--quick", &e->quick, e->budget_unit);
+    fprintf(f, "run: radpt experiment %s [--quick] -o DIR; --budget and --seeds override the settings\n", e->name);
+}
+
 rp_status rp_experiment_setting_of(const rp_experiment_params *p, rp_experiment_setting *out, rp_error *err)
 {
     if (!p->experiment)
@@ -196,33 +271,81 @@ rp_status rp_experiment_setting_of(const rp_experiment_params *p, rp_experiment_
 static const rp_experiment experiments[] = {
     {.name = "cornell",
      .summary = "all methods at equal time on the Cornell box",
+     .scenes = "scenes/cornell.scene",
+     .claim = "at equal time every method's image RMSE against the path-traced reference falls with time; "
+              "the path tracer with independent numbers falls as N^-1/2 (fitted slope near -0.5 against "
+              "samples) and radiosity curves flatten at their mesh's discretisation error",
+     .quick = {1.0, 2, 256,
+               "pathtrace:sampler=random,pathtrace,southwell:elements=150,southwell:elements=600,"
+               "hierarchical:bf-epsilon=0.05:min-area=1e-4,stochastic-jacobi"},
+     .full = {6.0, 3, 2048,
+              "pathtrace:sampler=random,pathtrace,southwell:elements=250,southwell:elements=1000,"
+              "gauss-seidel:elements=1000:reconstruct=gouraud,hierarchical,stochastic-jacobi"},
      .run = rp_exp_cornell},
     {.name = "samplers",
      .summary = "random, stratified and Sobol' sampling: RMSE against spp and slopes",
+     .scenes = "scenes/cornell.scene",
+     .claim = "random sampling's RMSE falls as N^-1/2; stratified and Sobol' reach a lower RMSE at equal samples",
+     .quick = {1.0, 2, 256, "pathtrace:sampler=random,pathtrace:sampler=stratified,pathtrace:sampler=sobol"},
+     .full = {10.0, 3, 2048, "pathtrace:sampler=random,pathtrace:sampler=stratified,pathtrace:sampler=sobol"},
      .run = rp_exp_samplers},
     {.name = "furnace",
      .summary = "reflectance 0.1 to 0.99: sweeps and time to tolerance, iterative solvers and path tracer",
+     .scenes = "closed furnaces built in memory (reflectance 0.1 to 0.99)",
+     .claim = "every method converges to the closed form L = Le / (1 - rho); the iterative solvers' sweeps to a "
+              "tolerance grow like 1 / (1 - rho)",
+     .quick = {2.0, 0, 0, NULL},
+     .full = {20.0, 0, 0, NULL},
      .run = rp_exp_furnace},
     {.name = "formfactors",
      .summary = "analytic, Monte Carlo and hemicube form factors against Howell's closed forms",
+     .scenes = "rectangle pairs built in memory (Howell C-11 and C-14)",
+     .claim = "the analytic form factor equals Howell's closed forms; Monte Carlo error falls as N^-1/2; the "
+              "hemicube's error is bounded by its resolution",
      .run = rp_exp_formfactors},
     {.name = "meshing",
      .summary = "radiosity error against element size, observed order",
+     .scenes = "scenes/cornell.scene",
+     .claim = "radiosity error falls with element size h at an observed order near 1 (flat) and higher with "
+              "Gouraud reconstruction",
+     .quick = {20.0, 0, 256, NULL},
+     .full = {300.0, 0, 2048, NULL},
      .run = rp_exp_meshing},
     {.name = "progressive",
      .summary = "progressive radiosity with and without ambient term and overshooting: error per shot",
+     .scenes = "scenes/cornell.scene",
+     .claim = "the ambient term lowers the early error; overshooting lowers the error per shot",
+     .quick = {300, 1, 256,
+               "southwell:elements=150,southwell:elements=150:ambient,southwell:elements=150:overshoot=1.5,"
+               "southwell:elements=150:ambient:overshoot=1.5"},
+     .full = {4000, 1, 2048,
+              "southwell:elements=500,southwell:elements=500:ambient,southwell:elements=500:overshoot=1.5,"
+              "southwell:elements=500:ambient:overshoot=1.5"},
+     .budget_unit = "shots",
      .run = rp_exp_progressive},
     {.name = "hierarchy",
      .summary = "hierarchical radiosity against the classic solvers, and links against leaves as bf-epsilon "
-                  "shrinks (when registered)",
+                "shrinks (when registered)",
+     .scenes = "scenes/cornell.scene",
+     .claim = "hierarchical radiosity reaches a given error sooner than the uniform solvers, and its links grow "
+              "about linearly with its leaves, not quadratically",
+     .quick = {2.0, 1, 256, "hierarchical,gauss-seidel:elements=250"},
+     .full = {20.0, 1, 2048, "hierarchical,gauss-seidel:elements=1000,southwell:elements=1000"},
      .run = rp_exp_hierarchy},
     {.name = "stability",
      .summary = "the stability atlas: each method pushed past its comfort zone (reflectance near 1, tiny lights, "
-                  "corners, contact, shadows, thin geometry, non-physical input)",
+                "corners, contact, shadows, thin geometry, non-physical input)",
+     .scenes = "configurations built in memory, with closed forms where they exist",
+     .claim = "each method's failure mode is where the theory puts it, and non-physical input is refused",
      .run = rp_exp_stability},
     {.name = "realscenes",
      .summary = "published OBJ/MTL scenes and scanned meshes: every method against the path tracer per "
-                   "surface, time and memory",
+                "surface, time and memory",
+     .scenes = "scenes/real/ (McGuire's Cornell boxes, the teapot, CGAL's elephant and armadillo)",
+     .claim = "on scenes nobody in the project wrote, every radiosity method agrees with the path tracer per "
+              "surface within the stated tolerance",
+     .quick = {8.0, 0, 16, NULL},
+     .full = {60.0, 0, 256, NULL},
      .run = rp_exp_realscenes},
 };
 

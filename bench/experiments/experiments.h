@@ -8,6 +8,7 @@
 
 #include <stdatomic.h>
 #include <stddef.h>
+#include <stdio.h>
 #include <stdint.h>
 
 #include "geometry/status.h"
@@ -61,6 +62,7 @@ typedef struct rp_experiment {
     const char *scenes;          /* scenes it runs on: files under scenes/, or what it builds */
     const char *claim;           /* the claim its report checks in numbers (and its test) */
     rp_experiment_setting quick, full;
+    const char *budget_unit;     /* what budget counts, NULL: seconds per run */
     /* RP_ERR_UNSUPPORTED: the experiment cannot run here (e.g. its method
      * is not registered). */
     rp_status (*run)(const rp_experiment_params *p, rp_error *err);
@@ -69,6 +71,10 @@ typedef struct rp_experiment {
 /* NULL-terminated list, and look-up by name. */
 const rp_experiment *const *rp_experiments(void);
 const rp_experiment *rp_experiment_lookup(const char *name);
+
+/* Prints the declaration of e (summary, scenes, claim, quick and full
+ * settings) for `radpt help experiment NAME`. */
+void rp_experiment_describe(const rp_experiment *e, FILE *f);
 
 /* The setting in force: p->experiment's quick or full one, with
  * p->budget and p->nseeds (when non-zero) in place of its budget and
