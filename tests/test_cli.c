@@ -12,6 +12,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "bench/experiments/experiments.h"
 #include "cli_util.h"
 
 /* Area of a planar polygon from its vertices (Newell's method), written
@@ -628,4 +629,51 @@ Test(cli, unconverged_runs_say_so, .timeout = 120)
     free(rtext);
     rp_run_free(&r);
     unlink(out);
+}
+
+/* `help` and `experiment --list` are generated from the registry: every
+ * registered experiment is named in both, with its summary. */
+Test(cli, help_and_list_name_every_experiment)
+{
+    rp_run h = rp_run_radpt("help"), l = rp_run_radpt("experiment --list");
+    cr_assert_eq(h.status, 0);
+    cr_assert_eq(l.status, 0);
+    size_t n = 0;
+    for (const rp_experiment *const *e = rp_experiments(); *e; e++, n++) {
+        cr_expect(strstr(h.out, (*e)->name) && strstr(h.out, (*e)->summary), "help lacks %s", (*e)->name);
+        cr_expect(strstr(l.out, (*e)->name) && strstr(l.out, (*e)->summary), "--list lacks %s", (*e)->name);
+        char args[128];
+        snprintf(args, sizeof args, "help experiment %s", (*e)->name);
+        rp_run d = rp_run_radpt(args);
+        cr_expect_eq(d.status, 0);
+        cr_expect(strstr(d.out, "claim checked:") && (*e)->claim && strstr(d.out, (*e)->claim), "%s", d.out);
+        rp_run_free(&d);
+    }
+    cr_expect_eq(rp_count_lines(l.out), n, "one line per experiment");
+    cr_expect(strstr(h.out, "stability"));
+    rp_run_free(&h);
+    rp_run_free(&l);
+}
+
+Test(cli, version_names_the_release)
+{
+    rp_run r = rp_run_radpt("--version");
+    cr_expect_eq(r.status, 0);
+    cr_expect(strncmp(r.out, "radpt 0.", 8) == 0 && strstr(r.out, "(git "), "%s", r.out);
+    rp_run_free(&r);
+}
+
+/* --quiet leaves stderr without progress or log lines, but keeps the
+ * output on stdout. */
+Test(cli, quiet_silences_logs)
+{
+    rp_run loud = rp_run_radpt("throughput scenes/cornell.scene --spp 1 --rays 1000");
+    rp_run quiet = rp_run_radpt("throughput scenes/cornell.scene --spp 1 --rays 1000 --quiet");
+    cr_assert_eq(loud.status, 0);
+    cr_assert_eq(quiet.status, 0);
+    cr_expect(strstr(loud.err, "casting"), "%s", loud.err);
+    cr_expect_str_eq(quiet.err, "");
+    cr_expect(strstr(quiet.out, "rays/s"), "%s", quiet.out);
+    rp_run_free(&loud);
+    rp_run_free(&quiet);
 }
