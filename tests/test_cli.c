@@ -677,3 +677,74 @@ Test(cli, quiet_silences_logs)
     rp_run_free(&loud);
     rp_run_free(&quiet);
 }
+
+/* -o's extension chooses the format: a PFM holds the same linear RGB as
+ * the EXR of the same run (bottom row first, little-endian floats, scale
+ * -1), a PNG is a PNG, and an unknown extension is refused before any
+ * work. */
+Test(cli, output_format_follows_the_extension)
+{
+    const char *exr = "/tmp/rp-fmt.exr", *pfm = "/tmp/rp-fmt.pfm", *png = "/tmp/rp-fmt.png";
+    rp_run a = rp_run_radpt("render scenes/cornell.scene --method pathtrace --spp 2 --camera "
+                            "\"eye 278 273 -800 look 278 273 0 up 0 1 0 fov 39.3 size 24 16\" -o /tmp/rp-fmt.exr");
+    rp_run b = rp_run_radpt("render scenes/cornell.scene --method pathtrace --spp 2 --camera "
+                            "\"eye 278 273 -800 look 278 273 0 up 0 1 0 fov 39.3 size 24 16\" -o /tmp/rp-fmt.pfm");
+    rp_run c = rp_run_radpt("render scenes/cornell.scene --method pathtrace --spp 2 --camera "
+                            "\"eye 278 273 -800 look 278 273 0 up 0 1 0 fov 39.3 size 24 16\" -o /tmp/rp-fmt.png");
+    rp_run d = rp_run_radpt("render scenes/cornell.scene --method pathtrace --spp 2 -o /tmp/rp-fmt.tiff");
+    cr_assert_eq(a.status, 0, "%s", a.err);
+    cr_assert_eq(b.status, 0, "%s", b.err);
+    cr_assert_eq(c.status, 0, "%s", c.err);
+    cr_expect_eq(d.status, 2);
+    cr_expect(strstr(d.err, ".exr") && strstr(d.err, ".pfm"), "%s", d.err);
+    uint32_t w, h;
+    size_t nc;
+    char **names;
+    float **planes;
+    rp_error err;
+    cr_assert_eq(rp_image_read_exr(exr, &w, &h, &nc, &names, &planes, &err), RP_OK);
+    cr_assert_eq(nc, 3);
+    const float *rgb[3] = {NULL, NULL, NULL}; /* EXR keeps channels sorted by name */
+    for (size_t i = 0; i < nc; i++)
+        rgb[strcmp(names[i], "R") == 0 ? 0 : strcmp(names[i], "G") == 0 ? 1 : 2] = planes[i];
+    cr_assert(rgb[0] && rgb[1] && rgb[2]);
+    FILE *f = fopen(pfm, "rb");
+    cr_assert_not_null(f);
+    char magic[3] = {0};
+    unsigned pw, ph;
+    double scale;
+    cr_assert_eq(fscanf(f, "%2s %u %u %lf", magic, &pw, &ph, &scale), 4);
+    fgetc(f); /* the single white space after the scale */
+    cr_expect_str_eq(magic, "PF");
+    cr_expect(pw == w && ph == h && scale == -1.0);
+    size_t mismatches = 0;
+    for (uint32_t y = h; y-- > 0;)
+        for (uint32_t x = 0; x < w; x++)
+            for (int ch = 0; ch < 3; ch++) {
+                unsigned char le[4];
+                cr_assert_eq(fread(le, 1, 4, f), 4);
+                uint32_t u = (uint32_t)le[0] | (uint32_t)le[1] << 8 | (uint32_t)le[2] << 16 | (uint32_t)le[3] << 24;
+                float v;
+                memcpy(&v, &u, 4);
+                mismatches += v != rgb[ch][(size_t)y * w + x];
+            }
+    cr_expect_eq(fgetc(f), EOF, "no bytes after the pixels");
+    fclose(f);
+    cr_expect_eq(mismatches, 0);
+    char *p = rp_read_file(png);
+    cr_expect(p && memcmp(p, "\x89PNG", 4) == 0);
+    free(p);
+    for (size_t i = 0; i < nc; i++) {
+        free(planes[i]);
+        free(names[i]);
+    }
+    free(planes);
+    free(names);
+    unlink(exr);
+    unlink(pfm);
+    unlink(png);
+    rp_run_free(&a);
+    rp_run_free(&b);
+    rp_run_free(&c);
+    rp_run_free(&d);
+}

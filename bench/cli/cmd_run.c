@@ -275,19 +275,32 @@ int rp_cmd_render(int argc, char **argv)
     int rc = rp_cli_parse(&cli, argc, argv, extra, 1);
     if (rc)
         return rc;
+    if (!cli.out) {
+        fprintf(stderr, "radpt render: needs -o OUT.exr|.png|.pfm (see radpt help)\n");
+        return 2;
+    }
+    /* the format is the extension's: EXR (every band, metadata), PNG (an
+     * sRGB preview) or PFM (linear RGB) */
+    const rp_image_format format = rp_image_format_of(cli.out);
+    if (format == RP_IMAGE_UNKNOWN) {
+        fprintf(stderr, "radpt render: -o %s: unknown image format; the extension chooses it: .exr (linear "
+                        "radiance, every band, metadata), .png (sRGB preview) or .pfm (linear RGB)\n", cli.out);
+        return 2;
+    }
+    if (cli.png && rp_image_format_of(cli.png) != RP_IMAGE_PNG) {
+        fprintf(stderr, "radpt render: --png %s: the preview is a PNG; name it .png\n", cli.png);
+        return 2;
+    }
     rp_exposure exposure = rp_exposure_fixed(0); /* --exposure EV, else automatic */
     const char *ev_text = rp_cli_extra(&cli, "exposure");
     if (ev_text) {
         rp_error e;
-        if (rp_exposure_parse(ev_text, &exposure, &e) != RP_OK || !cli.png) {
+        int has_png = cli.png || format == RP_IMAGE_PNG;
+        if (rp_exposure_parse(ev_text, &exposure, &e) != RP_OK || !has_png) {
             fprintf(stderr, "radpt render: %s (see radpt help)\n",
-                    cli.png ? e.message : "--exposure needs --png OUT.png");
+                    has_png ? e.message : "--exposure needs a PNG (--png OUT.png or -o OUT.png)");
             return 2;
         }
-    }
-    if (!cli.out) {
-        fprintf(stderr, "radpt render: needs -o OUT.exr (see radpt help)\n");
-        return 2;
     }
     const char *ckpt_path = rp_cli_extra(&cli, "checkpoint"), *resume_path = rp_cli_extra(&cli, "resume");
     const char *every_text = rp_cli_extra(&cli, "checkpoint-every");
@@ -417,20 +430,27 @@ int rp_cmd_render(int argc, char **argv)
         .planes = (const float *const *)planes.planes,
         .attrs = attrs, .nattrs = sizeof attrs / sizeof attrs[0] - (conv.known ? 0 : 4),
     };
-    st = rp_image_write_exr(cli.out, &img, &err);
+    /* R, G, B: the last three planes (grey: Y three times) */
+    size_t r0 = planes.nchannels >= 3 ? planes.nchannels - 3 : 0;
+    const float *pr = planes.planes[r0], *pg = planes.planes[planes.nchannels >= 3 ? r0 + 1 : 0],
+                *pb = planes.planes[planes.nchannels >= 3 ? r0 + 2 : 0];
+    if (format == RP_IMAGE_EXR)
+        st = rp_image_write_exr(cli.out, &img, &err);
+    else if (format == RP_IMAGE_PFM)
+        st = rp_image_write_pfm(cli.out, cam->width, cam->height, pr, pg, pb, &err);
     if (st != RP_OK)
         goto done;
-    if (cli.png) {
-        size_t r = planes.nchannels >= 3 ? planes.nchannels - 3 : 0;
-        const float *pr = planes.planes[r], *pg = planes.planes[planes.nchannels >= 3 ? r + 1 : 0],
-                    *pb = planes.planes[planes.nchannels >= 3 ? r + 2 : 0];
-        if (!ev_text && (st = rp_exposure_auto(npix, pr, pg, pb, &exposure, &err)) != RP_OK)
-            goto done;
-        if ((st = rp_image_write_png(cli.png, cam->width, cam->height, pr, pg, pb, &exposure, &err)) != RP_OK)
+    const char *pngs[2] = {format == RP_IMAGE_PNG ? cli.out : NULL, cli.png};
+    if ((pngs[0] || pngs[1]) && !ev_text && (st = rp_exposure_auto(npix, pr, pg, pb, &exposure, &err)) != RP_OK)
+        goto done;
+    for (int k = 0; k < 2; k++) {
+        if (!pngs[k])
+            continue;
+        if ((st = rp_image_write_png(pngs[k], cam->width, cam->height, pr, pg, pb, &exposure, &err)) != RP_OK)
             goto done;
         char note[160];
         rp_exposure_describe(&exposure, note, sizeof note);
-        fprintf(stderr, "radpt: %s: exposure %s\n", cli.png, note);
+        rp_cli_note("radpt: %s: exposure %s", pngs[k], note);
     }
     printf("wrote %s: %u x %u, %s, %.17g samples, %.3f s", cli.out, cam->width, cam->height,
            cli.method, est.samples, tot.seconds);

@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -733,6 +734,70 @@ static int png_encode(png_structp png, png_infop info, FILE *fp, uint32_t width,
     }
     png_write_end(png, info);
     return 0;
+}
+
+/* ---------------------------------------------------------------------
+ * PFM */
+
+rp_status rp_image_write_pfm(const char *path, uint32_t width, uint32_t height, const float *r, const float *g,
+                             const float *b, rp_error *err)
+{
+    if (width == 0 || height == 0)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: empty image", path);
+    size_t row = (size_t)width * 3;
+    float *line = malloc(row * sizeof *line);
+    if (!line)
+        return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
+    int fd;
+    char *tmp;
+    rp_status st = temp_open(path, &fd, &tmp, err);
+    if (st != RP_OK) {
+        free(line);
+        return st;
+    }
+    /* Header "PF" (colour), the size, and a negative scale: little-endian
+     * floats; rows go from the bottom of the image to its top. */
+    char head[64];
+    int hn = snprintf(head, sizeof head, "PF\n%u %u\n-1.0\n", width, height);
+    int ok = write(fd, head, (size_t)hn) == hn;
+    for (uint32_t y = height; ok && y-- > 0;) {
+        for (uint32_t x = 0; x < width; x++) {
+            size_t i = (size_t)y * width + x;
+            float v[3] = {r[i], g[i], b[i]};
+            for (int c = 0; c < 3; c++) {
+                /* to little-endian whatever the host */
+                uint32_t u;
+                memcpy(&u, &v[c], 4);
+                unsigned char *o = (unsigned char *)&line[3 * (size_t)x + (size_t)c];
+                o[0] = (unsigned char)u;
+                o[1] = (unsigned char)(u >> 8);
+                o[2] = (unsigned char)(u >> 16);
+                o[3] = (unsigned char)(u >> 24);
+            }
+        }
+        ok = write(fd, line, row * sizeof *line) == (ssize_t)(row * sizeof *line);
+    }
+    free(line);
+    if (!ok) {
+        int e = errno;
+        temp_discard(fd, tmp);
+        return rp_error_set(err, RP_ERR_RUNTIME, "%s: write failed: %s", path, strerror(e));
+    }
+    return temp_commit(fd, tmp, path, err);
+}
+
+rp_image_format rp_image_format_of(const char *path)
+{
+    const char *dot = strrchr(path, '.'), *slash = strrchr(path, '/');
+    if (!dot || (slash && dot < slash))
+        return RP_IMAGE_UNKNOWN;
+    if (!strcasecmp(dot, ".exr"))
+        return RP_IMAGE_EXR;
+    if (!strcasecmp(dot, ".png"))
+        return RP_IMAGE_PNG;
+    if (!strcasecmp(dot, ".pfm"))
+        return RP_IMAGE_PFM;
+    return RP_IMAGE_UNKNOWN;
 }
 
 rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,

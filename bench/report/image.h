@@ -84,4 +84,14 @@ rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
                              const float *r, const float *g, const float *b,
                              const rp_exposure *exposure, rp_error *err);
 
+/* Portable Float Map (Debevec's PFM): "PF", width height, scale -1.0
+ * (little-endian floats), rows from the bottom up; linear radiance as
+ * given.  Written like the others (temporary name, fsync, rename). */
+rp_status rp_image_write_pfm(const char *path, uint32_t width, uint32_t height, const float *r, const float *g,
+                             const float *b, rp_error *err);
+
+/* An output format, chosen by the file name's extension (any case). */
+typedef enum rp_image_format { RP_IMAGE_UNKNOWN, RP_IMAGE_EXR, RP_IMAGE_PNG, RP_IMAGE_PFM } rp_image_format;
+rp_image_format rp_image_format_of(const char *path);
+
 #endif
