@@ -14,6 +14,7 @@
 #include <inttypes.h>
 #include <math.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -142,6 +143,74 @@ static void command_line(int argc, char **argv, char *buf, size_t n)
         used += (size_t)snprintf(buf + used, n - used, "%s%s", i ? " " : "", i == 0 ? "radpt" : argv[i]);
 }
 
+/* ------------------------------------------------------------- studies */
+
+/* SIGINT / SIGTERM during bench or experiment: the flag goes to the run in
+ * progress (rp_options.cancel), which stops within a second or so; the
+ * finished runs are already recorded in DIR/journal.txt, and the outputs
+ * are written from them, marked incomplete.  A second signal ends the
+ * process at once (files are written to a temporary name and renamed). */
+static atomic_int study_cancel;
+_Static_assert(ATOMIC_INT_LOCK_FREE == 2, "the signal flag must be a lock-free atomic");
+
+static void on_study_signal(int sig)
+{
+    (void)sig;
+    atomic_store_explicit(&study_cancel, 1, memory_order_relaxed);
+}
+
+/* -o DIR starts a study, --resume DIR continues one: the directory and
+ * whether it resumes (exit 2 on a usage error). */
+static int study_dir(const rp_cli *cli, const char **dir, int *resume)
+{
+    const char *r = rp_cli_extra(cli, "resume");
+    *resume = r != NULL;
+    *dir = r ? r : cli->out;
+    if (r && cli->out && strcmp(r, cli->out) != 0) {
+        fprintf(stderr, "radpt %s: -o %s and --resume %s name two directories; --resume DIR alone continues the "
+                        "study in DIR\n", cli->command, cli->out, r);
+        return 2;
+    }
+    if (!*dir) {
+        fprintf(stderr, "radpt %s: needs -o DIR (or --resume DIR to continue an interrupted study; see radpt help)\n",
+                cli->command);
+        return 2;
+    }
+    return 0;
+}
+
+/* The command line with --resume DIR in place of -o DIR, for the hint. */
+static void resume_hint(int argc, char **argv, const char *dir, char *buf, size_t n)
+{
+    size_t used = 0;
+    buf[0] = '\0';
+    int has_resume = 0;
+    for (int i = 1; i < argc; i++)
+        has_resume |= strcmp(argv[i], "--resume") == 0;
+    for (int i = 0; i < argc && used < n; i++) {
+        if (strcmp(argv[i], "-o") == 0 && i + 1 < argc) {
+            if (!has_resume)
+                used += (size_t)snprintf(buf + used, n - used, " --resume %s", dir);
+            i++;
+            continue;
+        }
+        used += (size_t)snprintf(buf + used, n - used, "%s%s", i ? " " : "", i == 0 ? "radpt" : argv[i]);
+    }
+}
+
+typedef struct bench_sink {
+    const char *dir;
+} bench_sink;
+
+/* After each finished run: DIR/runs.csv holds every finished run. */
+static void on_bench_run(void *ctx, const rp_bench *b)
+{
+    const bench_sink *s = ctx;
+    rp_error e;
+    if (rp_bench_write_runs_csv(b, s->dir, &e) != RP_OK)
+        fprintf(stderr, "radpt: warning: %s\n", e.message);
+}
+
 /* ------------------------------------------------------------ reference */
 
 /* radpt reference --checkpoint: SIGINT / SIGTERM stop the render at the
@@ -263,7 +332,7 @@ int rp_cmd_reference(int argc, char **argv)
 int rp_cmd_bench(int argc, char **argv)
 {
     static const char *const extra[] = {"methods", "budget", "seeds", "checkpoints", "target", "cache",
-                                        "reference-spp", "reference-samples", "exposure", NULL};
+                                        "reference-spp", "reference-samples", "exposure", "resume", NULL};
     static const char *const flags[] = {"--surfaces", NULL};
     int found[1] = {0};
     char **av = calloc((size_t)argc + 1, sizeof *av);
@@ -291,10 +360,10 @@ int rp_cmd_bench(int argc, char **argv)
         rc = parse_exposure(&cli, &exposure);
     if (!rc && cli.time_budget > 0)
         budget = cli.time_budget; /* --time works as --budget */
-    if (!rc && !cli.out) {
-        fprintf(stderr, "radpt bench: needs -o DIR (see radpt help)\n");
-        rc = 2;
-    }
+    const char *dir = NULL;
+    int resume = 0;
+    if (!rc)
+        rc = study_dir(&cli, &dir, &resume);
     if (!rc && cli.seed == 0) {
         fprintf(stderr, "radpt bench: --seed must be at least 1 (see radpt help)\n");
         rc = 2;
@@ -315,25 +384,46 @@ int rp_cmd_bench(int argc, char **argv)
         free(av);
         return 2;
     }
+    rp_cli_catch_signals(on_study_signal);
     front fr = {0};
     rp_scene *scene = NULL;
     rp_reference *ref = NULL;
     rp_bench *bench = NULL;
+    rp_journal *journal = NULL;
     st = rp_load_scene(cli.scene, cli.camera, 1, &scene, &err);
+    rp_reference_params rp = {.size = sizeof rp, .spp = ref_spp, .samples = ref_samples,
+                              .threads = cli.threads, .cache_dir = rp_cli_extra(&cli, "cache"),
+                              .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr,
+                              .cancel = &study_cancel};
+    if (st == RP_OK)
+        st = rp_mkdirs(dir, &err);
     if (st == RP_OK) {
-        rp_reference_params rp = {.size = sizeof rp, .spp = ref_spp, .samples = ref_samples,
-                                  .threads = cli.threads, .cache_dir = rp_cli_extra(&cli, "cache"),
-                                  .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr};
+        /* the journal's identity: everything that changes the results */
+        char keytext[1024], key[17], hash[17], identity[3000];
+        st = rp_reference_key(scene, &rp, keytext, sizeof keytext, key, &err);
+        rp_scene_hash(scene, hash);
+        snprintf(identity, sizeof identity,
+                 "bench scene %s reference %s methods %s budget %.17g checkpoints %lu seeds %lu seed %llu "
+                 "surfaces %d",
+                 hash, key, list, budget, levels, seeds, (unsigned long long)cli.seed, found[0]);
+        if (st == RP_OK)
+            st = rp_journal_open(dir, identity, resume, &journal, &err);
+        if (st == RP_OK && resume)
+            rp_cli_note("radpt bench: resuming %s: %zu finished runs recorded", dir, rp_journal_count(journal));
+    }
+    if (st == RP_OK) {
         st = rp_reference_get(scene, cli.scene, &rp, &ref, &err);
         front_done(&fr);
     }
+    bench_sink sink = {.dir = dir};
     if (st == RP_OK) {
         rp_bench_params bp = {.size = sizeof bp, .nseeds = (unsigned)seeds, .seed = cli.seed, .target = target,
-                              .log = front_log, .log_ctx = &fr};
+                              .log = front_log, .log_ctx = &fr, .journal = journal, .image_dir = dir,
+                              .on_run = on_bench_run, .on_run_ctx = &sink};
         bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = (unsigned)levels,
                                      .schedule = RP_SCHEDULE_TIME, .threads = cli.threads,
                                      .surfaces_for_mc = found[0], .keep_image = 1,
-                                     .progress = front_progress, .progress_ctx = &fr};
+                                     .progress = front_progress, .progress_ctx = &fr, .cancel = &study_cancel};
         st = rp_bench_run(scene, cli.scene, ref, methods, nmethods, &bp, &bench, &err);
         front_done(&fr);
     }
@@ -342,16 +432,28 @@ int rp_cmd_bench(int argc, char **argv)
         command_line(argc, argv, cmd, sizeof cmd);
         rp_bench_output out = {.size = sizeof out, .sheet = 1, .command = cmd,
                                .exposure = rp_cli_extra(&cli, "exposure") ? &exposure : NULL};
-        st = rp_bench_write(bench, cli.out, &out, note, &err);
+        st = rp_bench_write(bench, dir, &out, note, &err);
         if (st == RP_OK) {
             if (note[0])
                 fprintf(stderr, "radpt bench: %s\n", note);
-            printf("report: %s/report.md (runs.csv, summary.json and charts in %s)\n", cli.out, cli.out);
-            if (bench->failures)
+            printf("report: %s/report.md (runs.csv, summary.json and charts in %s)\n", dir, dir);
+            if (bench->interrupted) {
+                char hint[2400];
+                resume_hint(argc, argv, dir, hint, sizeof hint);
+                st = rp_error_set(&err, RP_ERR_INTERRUPTED,
+                                  "interrupted after %zu of %zu runs (recorded in %s; the report is marked "
+                                  "incomplete); continue with: %s",
+                                  bench->nruns, bench->planned, rp_journal_path(journal), hint);
+            } else if (bench->failures)
                 st = rp_error_set(&err, RP_ERR_RUNTIME, "%zu run(s) failed; see %s/report.md", bench->failures,
-                                  cli.out);
+                                  dir);
         }
+    } else if (st == RP_ERR_INTERRUPTED) {
+        char hint[2400];
+        resume_hint(argc, argv, dir, hint, sizeof hint);
+        rp_error_set(&err, RP_ERR_INTERRUPTED, "interrupted before any run finished; continue with: %s", hint);
     }
+    rp_journal_close(journal);
     rp_bench_destroy(bench);
     rp_reference_destroy(ref);
     rp_scene_destroy(scene);

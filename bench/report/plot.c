@@ -86,7 +86,7 @@ static void csv_num(FILE *f, double v)
         fprintf(f, "%.6g", v);
 }
 
-static rp_status write_runs_csv(const rp_bench *b, const char *dir, rp_error *err)
+rp_status rp_bench_write_runs_csv(const rp_bench *b, const char *dir, rp_error *err)
 {
     char path[1024];
     rp_out o;
@@ -180,10 +180,12 @@ static rp_status write_summary_json(const rp_bench *b, const char *dir, const ch
     fprintf(f, "{\n  \"scene\": ");
     rp_json_string(f, b->scene_name);
     fprintf(f, ",\n  \"scene_hash\": \"%s\",\n  \"budget\": %g,\n  \"budget_unit\": \"%s\",\n  \"checkpoints\": %u,\n"
-               "  \"seeds\": %u,\n  \"first_seed\": %llu,\n  \"threads\": %d,\n",
+               "  \"seeds\": %u,\n  \"first_seed\": %llu,\n  \"threads\": %d,\n  \"complete\": %s,\n"
+               "  \"runs_planned\": %zu,\n  \"runs_finished\": %zu,\n  \"runs_resumed\": %zu,\n",
             b->scene_hash, b->params.run.budget,
             b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "seconds", b->params.run.levels,
-            b->params.nseeds, (unsigned long long)b->params.seed, b->params.run.threads);
+            b->params.nseeds, (unsigned long long)b->params.seed, b->threads, b->interrupted ? "false" : "true",
+            b->planned, b->nruns, b->resumed);
     fprintf(f, "  \"reference\": {\"kind\": \"%s\", \"file\": ", r->kind == RP_REFERENCE_EXACT ? "exact" : "pathtrace");
     rp_json_string(f, r->exr_path);
     fprintf(f, ", \"cached\": %s, \"spp\": %lu, \"samples\": %lu, \"seed\": %llu, \"seconds\": %.3f, "
@@ -653,12 +655,20 @@ static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench
         fprintf(f, "# %s\n\n", opt->title);
     else
         fprintf(f, "# radpt bench: %s\n\n", b->scene_name);
+    if (b->interrupted)
+        fprintf(f, "**INCOMPLETE: interrupted after %zu of %zu runs.** Every number below is from the finished runs "
+                   "only. The finished runs are recorded in `journal.txt`; the same command with `--resume DIR` in "
+                   "place of `-o DIR` runs the rest.\n\n",
+                b->nruns, b->planned);
     if (opt && opt->preface)
         fprintf(f, "%s\n\n", opt->preface);
     fprintf(f, "Scene `%s` (hash `%s`); budget %g %s per run, checkpoints at budget × 2^-k for k = %u … 0; "
-               "Monte Carlo methods with %u seeds (first seed %llu); threads: %s.",
+               "Monte Carlo methods with %u seeds (first seed %llu); %d threads.",
             b->scene_name, b->scene_hash, b->params.run.budget, unit, b->params.run.levels - 1, b->params.nseeds,
-            (unsigned long long)b->params.seed, b->params.run.threads ? "as given" : "all cores");
+            (unsigned long long)b->params.seed, b->threads);
+    if (b->resumed)
+        fprintf(f, " %zu of the %zu runs were read back from the journal of an interrupted study (their timings "
+                   "are as first measured).", b->resumed, b->nruns);
     if (opt && opt->command)
         fprintf(f, "\nCommand: `%s`", opt->command);
     fprintf(f, "\n\nEvery number below is computed from the rows of `runs.csv` (columns at the end); "
@@ -859,7 +869,7 @@ rp_status rp_bench_write(const rp_bench *b, const char *dir, const rp_bench_outp
     char plots_note[256] = "";
     rp_status st = rp_mkdirs(dir, err);
     if (st == RP_OK)
-        st = write_runs_csv(b, dir, err);
+        st = rp_bench_write_runs_csv(b, dir, err);
     size_t ttt_points = 0;
     if (st == RP_OK)
         st = write_data(b, dir, &ttt_points, err);

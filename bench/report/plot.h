@@ -36,6 +36,10 @@ typedef struct rp_bench_output {
 rp_status rp_bench_write(const rp_bench *b, const char *dir, const rp_bench_output *opt, char *note,
                          rp_error *err);
 
+/* Writes DIR/runs.csv alone (atomically): the rows of the runs finished
+ * so far, e.g. after each run of a long study. */
+rp_status rp_bench_write_runs_csv(const rp_bench *b, const char *dir, rp_error *err);
+
 /* The columns of runs.csv, one per line "name: meaning" (for --help and
  * the README). */
 extern const char *const rp_runs_csv_columns;

@@ -2,12 +2,15 @@
 #include "bench/run/harness.h"
 
 #include <math.h>
+#include <omp.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
 #include <time.h>
 
+#include "bench/report/files.h"
 #include "bench/run/clock.h"
 
 /* ------------------------------------------------------------- specs */
@@ -216,7 +219,8 @@ rp_status rp_harness_run(const rp_scene *scene, const rp_reference *ref, const r
     }
 
     rp_options o = {.size = sizeof o, .want = c.want, .seed = seed, .threads = hp->threads,
-                    .keys = m->keys, .values = m->values, .count = m->count, .open_ended = 1};
+                    .keys = m->keys, .values = m->values, .count = m->count, .open_ended = 1,
+                    .cancel = hp->cancel};
     rp_error rerr;
     rp_error_clear(&rerr);
     rp_peak_rss_reset();
@@ -238,6 +242,10 @@ rp_status rp_harness_run(const rp_scene *scene, const rp_reference *ref, const r
         cpu += rp_cpu_clock() - c0;
         if (st != RP_OK)
             break;
+        if (rp_cancelled(hp->cancel)) {
+            st = rp_error_set(&rerr, RP_ERR_INTERRUPTED, "interrupted");
+            break;
+        }
         steps++;
         sum.rays += info.rays;
         sum.paths += info.paths;
@@ -443,6 +451,197 @@ void rp_bench_summarise(rp_bench *b)
     }
 }
 
+/* ------------------------------------------------- journal records */
+
+static void bench_log(const rp_bench *b, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+static void bench_log(const rp_bench *b, const char *fmt, ...)
+{
+    if (!b->params.log)
+        return;
+    char msg[1400];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    b->params.log(b->params.log_ctx, msg);
+}
+
+/* A finished run as journal numbers: status, rows, surface values, then
+ * each row's fields; the error text under KEY#error, a kept image in
+ * IMAGE_DIR/runs/ under the FNV hash of KEY (binary floats). */
+#define CP_FIELDS 23
+
+static void cp_to(const rp_checkpoint *c, double *v)
+{
+    double x[CP_FIELDS] = {c->index, c->target, c->wall_s, c->cpu_s, c->steps, c->rays, c->paths, c->iterations,
+                           c->form_factors, c->samples, c->residual, c->unshot, c->peak_rss_mb, c->solver_mb,
+                           c->rmse, c->relmse, c->mae, c->surface_err, c->rmse_debiased, c->measure_s, c->ref_flag,
+                           c->converged, c->final};
+    memcpy(v, x, sizeof x);
+}
+
+static void cp_from(const double *v, rp_checkpoint *c)
+{
+    c->index = (int)v[0];
+    c->target = v[1];
+    c->wall_s = v[2];
+    c->cpu_s = v[3];
+    c->steps = v[4];
+    c->rays = v[5];
+    c->paths = v[6];
+    c->iterations = v[7];
+    c->form_factors = v[8];
+    c->samples = v[9];
+    c->residual = v[10];
+    c->unshot = v[11];
+    c->peak_rss_mb = v[12];
+    c->solver_mb = v[13];
+    c->rmse = v[14];
+    c->relmse = v[15];
+    c->mae = v[16];
+    c->surface_err = v[17];
+    c->rmse_debiased = v[18];
+    c->measure_s = v[19];
+    c->ref_flag = (int)v[20];
+    c->converged = (int)v[21];
+    c->final = (int)v[22];
+}
+
+static size_t image_values(const rp_bench *b)
+{
+    const rp_camera *cam = rp_scene_camera(b->scene);
+    return cam && b->ref->radiance ? (size_t)cam->width * cam->height * rp_scene_nbands(b->scene) : 0;
+}
+
+static void image_path(const rp_bench *b, const char *key, char *out, size_t n)
+{
+    char h[17], name[64];
+    rp_hash_text(key, h);
+    snprintf(name, sizeof name, "runs/%s.f32", h);
+    rp_path_join(out, n, b->params.image_dir ? b->params.image_dir : ".", name);
+}
+
+static rp_status trial_put(const rp_bench *b, const char *key, const rp_trial *run, rp_error *err)
+{
+    rp_journal *j = b->params.journal;
+    if (!j)
+        return RP_OK;
+    size_t ns = run->surfaces ? rp_scene_nsurfaces(b->scene) * rp_scene_nbands(b->scene) : 0;
+    size_t n = 4 + ns + CP_FIELDS * run->ncp;
+    double *v = malloc(n * sizeof *v);
+    if (!v)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    v[0] = run->status;
+    v[1] = (double)run->ncp;
+    v[2] = (double)ns;
+    v[3] = run->image != NULL;
+    for (size_t i = 0; i < ns; i++)
+        v[4 + i] = run->surfaces[i];
+    for (size_t i = 0; i < run->ncp; i++)
+        cp_to(&run->cp[i], v + 4 + ns + CP_FIELDS * i);
+    rp_status st = RP_OK;
+    if (run->image) {
+        /* the image first: a record that exists always has its image */
+        char path[1200], dir[1100];
+        rp_path_join(dir, sizeof dir, b->params.image_dir ? b->params.image_dir : ".", "runs");
+        st = rp_mkdirs(dir, err);
+        image_path(b, key, path, sizeof path);
+        rp_out o;
+        if (st == RP_OK && (st = rp_out_open(&o, path, err)) == RP_OK) {
+            size_t nv = image_values(b);
+            int ok = fwrite(run->image, sizeof *run->image, nv, o.f) == nv;
+            st = rp_out_close(&o, ok, err);
+            if (st == RP_OK && !ok)
+                st = rp_error_set(err, RP_ERR_RUNTIME, "%s: write failed", path);
+        }
+    }
+    if (st == RP_OK && run->status != RP_OK) {
+        char ekey[640], text[1024];
+        snprintf(ekey, sizeof ekey, "%s#error", key);
+        snprintf(text, sizeof text, "%s", run->error);
+        for (char *c = text; *c; c++)
+            if (*c == '\n')
+                *c = ' ';
+        st = rp_journal_put(j, ekey, text, err);
+    }
+    if (st == RP_OK)
+        st = rp_journal_put_doubles(j, key, v, n, err);
+    free(v);
+    return st;
+}
+
+/* Reads a recorded run back into run (run->cp stays NULL when key is not
+ * recorded). */
+static rp_status trial_get(const rp_bench *b, const char *key, uint64_t seed, int keep_image, rp_trial *run,
+                           rp_error *err)
+{
+    memset(run, 0, sizeof *run);
+    run->seed = seed;
+    const char *text = rp_journal_get(b->params.journal, key);
+    if (!text)
+        return RP_OK;
+    size_t n = 1;
+    for (const char *c = text; *c; c++)
+        n += *c == ' ';
+    double *v = malloc((n + 1) * sizeof *v);
+    if (!v)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    size_t ns = 0, ncp = 0;
+    int ok = n >= 4 && rp_journal_get_doubles(b->params.journal, key, v, n);
+    if (ok) {
+        ncp = (size_t)v[1];
+        ns = (size_t)v[2];
+        ok = n == 4 + ns + CP_FIELDS * ncp && ncp > 0 &&
+             (ns == 0 || ns == rp_scene_nsurfaces(b->scene) * rp_scene_nbands(b->scene));
+    }
+    if (!ok) {
+        free(v);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: the record of '%s' is malformed",
+                            rp_journal_path(b->params.journal), key);
+    }
+    run->status = (rp_status)v[0];
+    run->cp = calloc(ncp, sizeof *run->cp);
+    run->surfaces = ns ? malloc(ns * sizeof *run->surfaces) : NULL;
+    if (!run->cp || (ns && !run->surfaces)) {
+        free(v);
+        rp_trial_free(run);
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    }
+    run->ncp = ncp;
+    for (size_t i = 0; i < ns; i++)
+        run->surfaces[i] = v[4 + i];
+    for (size_t i = 0; i < ncp; i++)
+        cp_from(v + 4 + ns + CP_FIELDS * i, &run->cp[i]);
+    int has_image = v[3] != 0;
+    free(v);
+    if (run->status != RP_OK) {
+        char ekey[640];
+        snprintf(ekey, sizeof ekey, "%s#error", key);
+        const char *e = rp_journal_get(b->params.journal, ekey);
+        snprintf(run->error, sizeof run->error, "%s", e ? e : rp_status_string(run->status));
+    }
+    if (has_image && keep_image) {
+        char path[1200];
+        image_path(b, key, path, sizeof path);
+        size_t nv = image_values(b);
+        FILE *f = fopen(path, "rb");
+        run->image = malloc((nv ? nv : 1) * sizeof *run->image);
+        int got = f && run->image && fread(run->image, sizeof *run->image, nv, f) == nv && fgetc(f) == EOF;
+        if (f)
+            fclose(f);
+        if (!got) {
+            rp_trial_free(run);
+            return rp_error_set(err, RP_ERR_INPUT, "%s: missing or short (the image of recorded run '%s')", path,
+                                key);
+        }
+    }
+    return RP_OK;
+}
+
 rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_reference *ref,
                        const rp_method_spec *methods, size_t nmethods, const rp_bench_params *params,
                        rp_bench **out, rp_error *err)
@@ -475,22 +674,45 @@ rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_r
     }
     for (size_t i = 0; i < nmethods; i++)
         spec_copy(&b->methods[i], &methods[i]);
-    for (size_t i = 0; i < nmethods; i++) {
+    b->planned = nruns;
+    b->threads = b->params.run.threads ? b->params.run.threads : omp_get_max_threads();
+    size_t k = 0;
+    for (size_t i = 0; i < nmethods && !b->interrupted; i++) {
         unsigned ns = rp_method_is_monte_carlo(&b->methods[i]) ? b->params.nseeds : 1;
-        for (unsigned s = 0; s < ns; s++) {
+        for (unsigned s = 0; s < ns && !b->interrupted; s++, k++) {
             rp_trial *run = &b->runs[b->nruns];
             uint64_t seed = b->params.seed + s;
-            if (b->params.log) {
-                char msg[400];
-                snprintf(msg, sizeof msg, "running %s, seed %llu, budget %g %s", b->methods[i].text,
-                         (unsigned long long)seed, b->params.run.budget,
-                         b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s");
-                b->params.log(b->params.log_ctx, msg);
-            }
             rp_harness_params hp = b->params.run;
             /* the image sheet shows the first seed */
             hp.keep_image = hp.keep_image && s == 0;
-            rp_status st = rp_harness_run(scene, ref, &b->methods[i], seed, &hp, run, err);
+            char key[600];
+            snprintf(key, sizeof key, "%s%s seed %llu", b->params.journal_prefix ? b->params.journal_prefix : "",
+                     b->methods[i].text, (unsigned long long)seed);
+            rp_status st = trial_get(b, key, seed, hp.keep_image, run, err);
+            if (st == RP_OK && run->cp) {
+                b->resumed++;
+                bench_log(b, "run %zu of %zu: %s seed %llu: recorded, read back from %s", k + 1, nruns,
+                          b->methods[i].text, (unsigned long long)seed, rp_journal_path(b->params.journal));
+            } else if (st == RP_OK) {
+                if (rp_cancelled(hp.cancel)) {
+                    b->interrupted = 1;
+                    break;
+                }
+                double eta = (double)(nruns - k) * b->params.run.budget;
+                bench_log(b, "run %zu of %zu: %s, seed %llu, budget %g %s (ETA: at most %.3g %s for this and the rest)", k + 1,
+                          nruns, b->methods[i].text, (unsigned long long)seed, b->params.run.budget,
+                          b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s", eta,
+                          b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s");
+                st = rp_harness_run(scene, ref, &b->methods[i], seed, &hp, run, err);
+                if (st == RP_OK && run->status == RP_ERR_INTERRUPTED) {
+                    /* not finished: not recorded, not counted */
+                    rp_trial_free(run);
+                    b->interrupted = 1;
+                    break;
+                }
+                if (st == RP_OK)
+                    st = trial_put(b, key, run, err);
+            }
             if (st != RP_OK) {
                 rp_bench_destroy(b);
                 return st;
@@ -499,19 +721,14 @@ rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_r
             b->nruns++;
             if (run->status != RP_OK) {
                 b->failures++;
-                if (b->params.log) {
-                    char msg[1300];
-                    snprintf(msg, sizeof msg, "%s seed %llu failed: %s", b->methods[i].text,
-                             (unsigned long long)seed, run->error);
-                    b->params.log(b->params.log_ctx, msg);
-                }
-            } else if (b->params.log && run->ncp) {
+                bench_log(b, "%s seed %llu failed: %s", b->methods[i].text, (unsigned long long)seed, run->error);
+            } else if (run->ncp) {
                 const rp_checkpoint *cp = &run->cp[run->ncp - 1];
-                char msg[400];
-                snprintf(msg, sizeof msg, "  %s seed %llu: %.3g s, RMSE %.4g, surface error %.4g", b->methods[i].text,
-                         (unsigned long long)seed, cp->wall_s, cp->rmse, cp->surface_err);
-                b->params.log(b->params.log_ctx, msg);
+                bench_log(b, "  %s seed %llu: %.3g s, RMSE %.4g, surface error %.4g", b->methods[i].text,
+                          (unsigned long long)seed, cp->wall_s, cp->rmse, cp->surface_err);
             }
+            if (b->params.on_run)
+                b->params.on_run(b->params.on_run_ctx, b);
         }
     }
     rp_bench_summarise(b);

@@ -20,12 +20,14 @@
 #ifndef RP_HARNESS_H
 #define RP_HARNESS_H
 
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 
 #include "geometry/scene.h"
 #include "solvers/solver.h"
 #include "bench/run/clock.h"
+#include "bench/run/journal.h"
 #include "bench/run/metrics.h"
 #include "bench/run/reference.h"
 
@@ -94,6 +96,11 @@ typedef struct rp_harness_params {
     int keep_image;         /* keep the final image in the run */
     rp_progress_fn progress;
     void *progress_ctx;
+    /* Set (by a signal handler) to stop: passed to the solver
+     * (rp_options.cancel) and checked at every step boundary; the run then
+     * ends with status RP_ERR_INTERRUPTED and its rows so far.  May be
+     * NULL. */
+    const atomic_int *cancel;
 } rp_harness_params;
 
 /* One method with one seed. */
@@ -138,6 +145,8 @@ typedef struct rp_method_summary {
     size_t runs_ok, runs;
 } rp_method_summary;
 
+struct rp_bench;
+
 typedef struct rp_bench_params {
     size_t size;            /* sizeof(rp_bench_params) */
     rp_harness_params run;
@@ -146,10 +155,27 @@ typedef struct rp_bench_params {
     double target;          /* RMSE for time-to-error (0: automatic) */
     rp_log_fn log;
     void *log_ctx;
+    /* The study's journal (may be NULL): each finished run is recorded
+     * under "<journal_prefix><spec> seed <s>" the moment it ends, and a run
+     * already recorded (--resume) is read back instead of run again, so a
+     * resumed bench equals an uninterrupted one except its timings.  Kept
+     * final images (keep_image) go to <image_dir>/runs/ beside it. */
+    rp_journal *journal;
+    const char *journal_prefix;
+    const char *image_dir;
+    /* Called after each finished run (e.g. to rewrite runs.csv); may be
+     * NULL. */
+    void (*on_run)(void *ctx, const struct rp_bench *b);
+    void *on_run_ctx;
 } rp_bench_params;
 
 typedef struct rp_bench {
     rp_bench_params params;
+    size_t planned;               /* runs the study has: methods x seeds */
+    size_t resumed;               /* runs read back from the journal */
+    int interrupted;              /* stopped by params.run.cancel: runs holds
+                                     the finished runs only */
+    int threads;                  /* threads the runs used */
     const char *scene_name;
     char scene_hash[17];
     const rp_scene *scene;
@@ -164,7 +190,9 @@ typedef struct rp_bench {
     size_t failures;
 } rp_bench;
 
-/* Runs every method (Monte Carlo ones with nseeds seeds) and summarises. */
+/* Runs every method (Monte Carlo ones with nseeds seeds) and summarises.
+ * Cancelled (params.run.cancel), it returns RP_OK with b->interrupted set
+ * and the runs finished so far. */
 rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_reference *ref,
                        const rp_method_spec *methods, size_t nmethods, const rp_bench_params *params,
                        rp_bench **out, rp_error *err);

@@ -361,7 +361,7 @@ static rp_status make_pathtraced(const rp_scene *scene, const char *scene_name, 
     rp_options o = {.size = sizeof o,
                     .want = RP_WANT_SURFACES | (r->radiance ? RP_WANT_IMAGE : 0),
                     .seed = seed, .threads = p ? p->threads : 0,
-                    .keys = keys, .values = values, .count = 4};
+                    .keys = keys, .values = values, .count = 4, .cancel = PARAM(p, cancel, NULL)};
     rp_solver *solver = NULL;
     rp_status st = rp_solver_create(rp_solver_lookup("pathtrace"), scene, &o, &solver, err);
     if (st != RP_OK)
@@ -419,6 +419,10 @@ static rp_status make_pathtraced(const rp_scene *scene, const char *scene_name, 
             break;
         if (stop && *stop) {
             interrupted = 1;
+            break;
+        }
+        if (rp_cancelled(o.cancel)) {
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted while rendering the reference");
             break;
         }
         if (ckpt && now - last_ckpt >= every) {

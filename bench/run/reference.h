@@ -29,6 +29,7 @@
 #define RP_REFERENCE_H
 
 #include <signal.h>
+#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -66,6 +67,11 @@ typedef struct rp_reference_params {
     double checkpoint_every;
     const char *resume;
     volatile sig_atomic_t *stop;
+    /* Cancellation of a render being made (may be NULL): passed to the
+     * path tracer (rp_options.cancel) and checked between its steps; the
+     * reference is then not written and the call returns
+     * RP_ERR_INTERRUPTED. */
+    const atomic_int *cancel;
 } rp_reference_params;
 
 /* The reference seed: far from the seeds benchmarks use (1, 2, 3, ...). */
