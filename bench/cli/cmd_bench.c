@@ -466,7 +466,7 @@ int rp_cmd_bench(int argc, char **argv)
 
 int rp_cmd_experiment(int argc, char **argv)
 {
-    static const char *const extra[] = {"budget", "seeds", "cache", "scenes", "exposure", NULL};
+    static const char *const extra[] = {"budget", "seeds", "cache", "scenes", "exposure", "resume", NULL};
     static const char *const flags[] = {"--quick", NULL};
     int found[1] = {0};
     char **av = calloc((size_t)argc + 1, sizeof *av);
@@ -495,10 +495,10 @@ int rp_cmd_experiment(int argc, char **argv)
             rc = 2;
         }
     }
-    if (!rc && !cli.out) {
-        fprintf(stderr, "radpt experiment: needs -o DIR (see radpt help)\n");
-        rc = 2;
-    }
+    const char *dir = NULL;
+    int resume = 0;
+    if (!rc)
+        rc = study_dir(&cli, &dir, &resume);
     if (rc) {
         free(av);
         return rc;
@@ -506,18 +506,41 @@ int rp_cmd_experiment(int argc, char **argv)
     char cmd[2048];
     command_line(argc, argv, cmd, sizeof cmd);
     front fr = {0};
-    rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = found[0], .out_dir = cli.out,
+    rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = found[0], .out_dir = dir,
                               .cache_dir = rp_cli_extra(&cli, "cache"), .scenes_dir = rp_cli_extra(&cli, "scenes"),
                               .threads = cli.threads, .budget = budget, .nseeds = (unsigned)seeds, .command = cmd,
                               .log = front_log, .log_ctx = &fr, .progress = front_progress, .progress_ctx = &fr,
-                              .exposure = rp_cli_extra(&cli, "exposure") ? &exposure : NULL};
+                              .exposure = rp_cli_extra(&cli, "exposure") ? &exposure : NULL,
+                              .cancel = &study_cancel};
     rp_error err;
     rp_error_clear(&err);
-    rp_cli_note("experiment %s%s: %s", e->name, p.quick ? " (quick)" : "", e->summary);
-    rp_status st = e->run(&p, &err);
-    front_done(&fr);
+    /* the journal's identity: the experiment and what changes its results */
+    char identity[512];
+    snprintf(identity, sizeof identity, "experiment %s quick %d budget %.17g seeds %lu", e->name, found[0], budget,
+             seeds);
+    rp_journal *journal = NULL;
+    rp_status st = rp_mkdirs(dir, &err);
     if (st == RP_OK)
-        printf("report: %s/report.md\n", cli.out);
+        st = rp_journal_open(dir, identity, resume, &journal, &err);
+    p.journal = journal;
+    if (st == RP_OK && resume)
+        rp_cli_note("radpt experiment: resuming %s: %zu finished units recorded", dir, rp_journal_count(journal));
+    rp_cli_catch_signals(on_study_signal);
+    rp_cli_note("experiment %s%s: %s", e->name, p.quick ? " (quick)" : "", e->summary);
+    if (st == RP_OK)
+        st = e->run(&p, &err);
+    front_done(&fr);
+    rp_journal_close(journal);
+    if (st == RP_OK)
+        printf("report: %s/report.md\n", dir);
+    if (st == RP_ERR_INTERRUPTED || (st != RP_OK && atomic_load(&study_cancel))) {
+        char hint[2400], why[1100];
+        resume_hint(argc, argv, dir, hint, sizeof hint);
+        snprintf(why, sizeof why, "%s", err.message);
+        rp_error_set(&err, RP_ERR_INTERRUPTED, "%s; what finished is recorded in %s/journal.txt (reports written "
+                     "so far are marked incomplete); continue with: %s", why[0] ? why : "interrupted", dir, hint);
+        st = RP_ERR_INTERRUPTED;
+    }
     free(av);
     return st == RP_OK ? 0 : rp_cli_fail(st, &err);
 }

@@ -34,10 +34,10 @@ typedef struct furnace_row {
  * methods) or its relative standard error (Monte Carlo) is at most tol, or
  * the budget runs out.  The estimate is not timed. */
 static rp_status furnace_run(const rp_scene *scene, double L, const rp_method_spec *m, double tol, double budget,
-                             int threads, size_t nelements, furnace_row *row, rp_error *err)
+                             const rp_experiment_params *p, size_t nelements, furnace_row *row, rp_error *err)
 {
-    rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = threads, .keys = m->keys,
-                    .values = m->values, .count = m->count, .open_ended = 1};
+    rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = p->threads, .keys = m->keys,
+                    .values = m->values, .count = m->count, .open_ended = 1, .cancel = p->cancel};
     rp_solver *s = NULL;
     double t0 = rp_clock();
     rp_status st = rp_solver_create(m->type, scene, &o, &s, err);
@@ -76,6 +76,8 @@ static rp_status furnace_run(const rp_scene *scene, double L, const rp_method_sp
         }
         if (wall >= budget)
             break;
+        if (rp_cancelled(p->cancel))
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
     }
     row->seconds = wall;
     row->iterations = iters;
@@ -145,8 +147,35 @@ rp_status rp_exp_furnace(const rp_experiment_params *p, rp_error *err)
             row->method = specs[i];
             /* Jacobi from B = E: relative error rho^(k+1) after k sweeps */
             row->theory_sweeps = log(tol) / log(rhos[r]) - 1;
+            /* a row finished before an interruption is read back from the
+             * study's journal, not run again */
+            char key[160];
+            snprintf(key, sizeof key, "furnace rho %.17g %s tol %.17g budget %.17g", rhos[r], specs[i], tol, budget);
+            double v[8];
+            if (rp_journal_get_doubles(p->journal, key, v, 8)) {
+                row->reached = (int)v[0];
+                row->seconds = v[1];
+                row->iterations = v[2];
+                row->sweeps = v[3];
+                row->steps = v[4];
+                row->error = v[5];
+                row->rel_stderr = v[6];
+                rp_exp_log(p, "furnace rho %g: %s: recorded, read back from the journal", rhos[r], specs[i]);
+                nrows++;
+                continue;
+            }
+            if (rp_cancelled(p->cancel)) {
+                st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted after %zu of %zu furnace runs", nrows,
+                                  nrho * nm);
+                break;
+            }
             rp_exp_log(p, "furnace rho %g: %s", rhos[r], specs[i]);
-            st = furnace_run(scene, L, &m[i], tol, budget, p->threads, nelements, row, err);
+            st = furnace_run(scene, L, &m[i], tol, budget, p, nelements, row, err);
+            if (st == RP_OK) {
+                double rec[8] = {row->reached, row->seconds, row->iterations, row->sweeps, row->steps, row->error,
+                                 row->rel_stderr, row->theory_sweeps};
+                st = rp_journal_put_doubles(p->journal, key, rec, 8, err);
+            }
             if (st == RP_OK) {
                 nrows++;
                 rp_exp_log(p, "  %s after %.3g s, %.0f iterations, error %.3g", row->reached ? "reached" : "NOT reached",

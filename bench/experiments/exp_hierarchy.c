@@ -43,7 +43,7 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
         const char *keys[2] = {"bf-epsilon", "min-area"};
         const char *values[2] = {eps, area};
         rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = p->threads,
-                        .keys = keys, .values = values, .count = 2};
+                        .keys = keys, .values = values, .count = 2, .cancel = p->cancel};
         rp_solver *s = NULL;
         double t0 = rp_clock();
         st = rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, err);
@@ -137,11 +137,12 @@ typedef struct ffrow {
 } ffrow;
 
 static rp_status hierarchy_solve(const rp_scene *scene, const rp_reference *ref, const rp_solver_type *t,
-                                 const char *key, const char *value, int threads, ffrow *row, rp_error *err)
+                                 const char *key, const char *value, int threads, const atomic_int *cancel,
+                                 ffrow *row, rp_error *err)
 {
     const char *keys[1] = {key}, *values[1] = {value};
     rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = threads, .keys = keys,
-                    .values = values, .count = 1};
+                    .values = values, .count = 1, .cancel = cancel};
     size_t ns = rp_scene_nsurfaces(scene), nb = rp_scene_nbands(scene);
     double *x = calloc(ns * nb, sizeof *x);
     if (!x)
@@ -183,9 +184,9 @@ static rp_status hierarchy_form_factors(const rp_experiment_params *p, const rp_
     size_t n = p->quick ? 2 : 5;
     const char *elements = p->quick ? "1200" : "4800";
     ffrow rows[6];
-    rp_status st = hierarchy_solve(scene, ref, gs, "elements", elements, p->threads, &rows[0], err);
+    rp_status st = hierarchy_solve(scene, ref, gs, "elements", elements, p->threads, p->cancel, &rows[0], err);
     for (size_t k = 0; k < n && st == RP_OK; k++)
-        st = hierarchy_solve(scene, ref, &rp_solver_hierarchical, "bf-epsilon", bf[k], p->threads, &rows[k + 1],
+        st = hierarchy_solve(scene, ref, &rp_solver_hierarchical, "bf-epsilon", bf[k], p->threads, p->cancel, &rows[k + 1],
                              err);
     if (st != RP_OK)
         return st;

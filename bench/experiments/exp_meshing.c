@@ -69,16 +69,40 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
             rp_method_spec m;
             if ((st = rp_method_spec_parse(spec, &m, err)) != RP_OK)
                 break;
+            /* a run finished before an interruption is read back from the
+             * study's journal, not run again */
+            char key[200];
+            snprintf(key, sizeof key, "meshing %s budget %.17g", spec, budget);
+            double rec[4];
+            if (rp_journal_get_doubles(p->journal, key, rec, 4)) {
+                w->rmse[r] = rec[0];
+                if (r == 0) {
+                    w->surface_err = rec[1];
+                    w->seconds = rec[2];
+                    w->converged = (int)rec[3];
+                }
+                rp_exp_log(p, "meshing: %s: recorded, read back from the journal", spec);
+                continue;
+            }
+            if (rp_cancelled(p->cancel)) {
+                st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+                break;
+            }
             rp_exp_log(p, "meshing: %s", spec);
             rp_harness_params hp = {.size = sizeof hp, .budget = budget, .levels = 1, .threads = p->threads,
                                     .stop_when_converged = 1, .progress = p->progress,
-                                    .progress_ctx = p->progress_ctx};
+                                    .progress_ctx = p->progress_ctx, .cancel = p->cancel};
             rp_trial run;
             if ((st = rp_harness_run(scene, ref, &m, 1, &hp, &run, err)) != RP_OK)
                 break;
-            if (run.status != RP_OK)
+            if (run.status == RP_OK && run.ncp) {
+                const rp_checkpoint *cp = &run.cp[run.ncp - 1];
+                double v[4] = {cp->rmse, cp->surface_err, cp->wall_s, cp->converged};
+                st = rp_journal_put_doubles(p->journal, key, v, 4, err);
+            }
+            if (st == RP_OK && run.status != RP_OK)
                 st = rp_error_set(err, run.status, "%s: %s", spec, run.error);
-            else if (run.ncp) {
+            else if (st == RP_OK && run.ncp) {
                 const rp_checkpoint *cp = &run.cp[run.ncp - 1];
                 w->rmse[r] = cp->rmse;
                 if (r == 0) {

@@ -416,7 +416,7 @@ static rp_status run_scene(const rp_experiment_params *p, const real_scene *rs, 
         return st;
     }
     const double budget = set.budget;
-    rp_reference_params rp = {.size = sizeof rp, .spp = set.reference_spp, .samples = p->quick ? 4096 : 65536,
+    rp_reference_params rp = {.size = sizeof rp, .spp = set.reference_spp, .cancel = p->cancel, .samples = p->quick ? 4096 : 65536,
                               .threads = p->threads, .cache_dir = p->cache_dir, .log = p->log, .log_ctx = p->log_ctx,
                               .progress = p->progress, .progress_ctx = p->progress_ctx};
     rp_reference *ref = NULL;
@@ -429,21 +429,29 @@ static rp_status run_scene(const rp_experiment_params *p, const real_scene *rs, 
     st = rp_reference_get(scene, path, &rp, &ref, err);
     if (st == RP_OK)
         st = rp_method_list_parse(list, &methods, &nmethods, err);
+    char dir[1024], prefix[128];
+    rp_path_join(dir, sizeof dir, p->out_dir, rs->id);
+    snprintf(prefix, sizeof prefix, "realscenes %s | ", rs->id);
+    if (st == RP_OK)
+        st = rp_mkdirs(dir, err);
     if (st == RP_OK) {
-        rp_bench_params bp = {.size = sizeof bp, .nseeds = 1, .seed = 1, .log = p->log, .log_ctx = p->log_ctx};
+        rp_bench_params bp = {.size = sizeof bp, .nseeds = 1, .seed = 1, .log = p->log, .log_ctx = p->log_ctx,
+                              .journal = p->journal, .journal_prefix = prefix, .image_dir = dir};
         bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = 1,
                                      .schedule = RP_SCHEDULE_TIME, .threads = p->threads, .surfaces_for_mc = 1,
                                      .stop_when_converged = 1, .keep_image = 1, .progress = p->progress,
-                                     .progress_ctx = p->progress_ctx};
+                                     .progress_ctx = p->progress_ctx, .cancel = p->cancel};
         st = rp_bench_run(scene, path, ref, methods, nmethods, &bp, &b, err);
     }
     if (st == RP_OK) {
-        char dir[1024], title[256], note[256];
-        rp_path_join(dir, sizeof dir, p->out_dir, rs->id);
+        char title[256], note[256];
         snprintf(title, sizeof title, "Experiment realscenes: %s", rs->id);
         rp_bench_output out = {.size = sizeof out, .title = title, .preface = rs->what, .sheet = 1,
                                .command = p->command};
         st = rp_bench_write(b, dir, &out, note, err);
+        if (st == RP_OK && b->interrupted)
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted after %zu of %zu runs", rs->id, b->nruns,
+                              b->planned);
     }
     if (st == RP_OK)
         st = compare(scene, ref, b, map, res, err);

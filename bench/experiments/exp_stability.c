@@ -162,7 +162,8 @@ static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const so
     if (st != RP_OK)
         return st;
     rp_options o = {.size = sizeof o, .want = so->want, .seed = so->seed ? so->seed : 1,
-                    .threads = so->threads ? so->threads : S->p->threads, .keys = m.keys, .values = m.values, .count = m.count};
+                    .threads = so->threads ? so->threads : S->p->threads, .keys = m.keys, .values = m.values, .count = m.count,
+                    .cancel = S->p->cancel};
     r->ns = rp_scene_nsurfaces(sc);
     r->nb = rp_scene_nbands(sc);
     const rp_camera *cam = rp_scene_camera(sc);
@@ -216,6 +217,8 @@ static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const so
         }
         if (r->seconds >= so->budget || (so->max_steps && r->steps >= so->max_steps))
             break;
+        if (rp_cancelled(S->p->cancel))
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
     }
     if (st == RP_OK) {
         rp_estimate e = {.radiance = r->img, .variance = r->var, .surface_radiance = r->surf,
@@ -1692,7 +1695,7 @@ static rp_status sec_acne(stab *S, rp_error *err)
             rp_error rerr;
             rows[k].failed[m] = 0;
             if ((st = srun_do(S, scene, spec, &so, &r, &rerr)) != RP_OK) {
-                if (st == RP_ERR_NOMEM) {
+                if (st == RP_ERR_NOMEM || st == RP_ERR_INTERRUPTED) {
                     rp_error_set(err, st, "%s", rerr.message);
                     break;
                 }

@@ -78,7 +78,7 @@ rp_reference_params rp_exp_ref_params(const rp_experiment_params *p, unsigned lo
 {
     rp_reference_params r = {.size = sizeof r, .spp = spp, .threads = p->threads, .cache_dir = p->cache_dir,
                              .log = p->log, .log_ctx = p->log_ctx, .progress = p->progress,
-                             .progress_ctx = p->progress_ctx};
+                             .progress_ctx = p->progress_ctx, .cancel = p->cancel};
     return r;
 }
 
@@ -100,11 +100,17 @@ rp_status rp_exp_run_bench_scheduled(const rp_experiment_params *p, const rp_sce
         rp_reference_params rp = rp_exp_ref_params(p, ref_spp);
         st = rp_reference_get(scene, scene_name, &rp, &ref, err);
     }
+    /* each bench of an experiment keys its runs by its method list, so two
+     * benches in one study do not share records */
+    char prefix[600];
+    snprintf(prefix, sizeof prefix, "bench %s | ", list);
     if (st == RP_OK) {
-        rp_bench_params bp = {.size = sizeof bp, .nseeds = nseeds, .seed = 1, .log = p->log, .log_ctx = p->log_ctx};
+        rp_bench_params bp = {.size = sizeof bp, .nseeds = nseeds, .seed = 1, .log = p->log, .log_ctx = p->log_ctx,
+                              .journal = p->journal, .journal_prefix = prefix, .image_dir = dir};
         bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = levels,
                                      .schedule = schedule, .threads = p->threads, .keep_image = 1,
-                                     .progress = p->progress, .progress_ctx = p->progress_ctx};
+                                     .progress = p->progress, .progress_ctx = p->progress_ctx,
+                                     .cancel = p->cancel};
         st = rp_bench_run(scene, scene_name, ref, methods, n, &bp, &b, err);
     }
     if (st == RP_OK) {
@@ -115,6 +121,8 @@ rp_status rp_exp_run_bench_scheduled(const rp_experiment_params *p, const rp_sce
         st = rp_bench_write(b, dir, &o, note, err);
         if (st == RP_OK && note[0])
             rp_exp_log(p, "%s", note);
+        if (st == RP_OK && b->interrupted)
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted after %zu of %zu runs", b->nruns, b->planned);
     }
     free(methods);
     if (st == RP_OK && bench_out) {

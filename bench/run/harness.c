@@ -724,8 +724,13 @@ rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_r
                 bench_log(b, "%s seed %llu failed: %s", b->methods[i].text, (unsigned long long)seed, run->error);
             } else if (run->ncp) {
                 const rp_checkpoint *cp = &run->cp[run->ncp - 1];
-                bench_log(b, "  %s seed %llu: %.3g s, RMSE %.4g, surface error %.4g", b->methods[i].text,
-                          (unsigned long long)seed, cp->wall_s, cp->rmse, cp->surface_err);
+                char rmse[32] = "n/a", surf[32] = "n/a";
+                if (isfinite(cp->rmse))
+                    snprintf(rmse, sizeof rmse, "%.4g", cp->rmse);
+                if (isfinite(cp->surface_err))
+                    snprintf(surf, sizeof surf, "%.4g", cp->surface_err);
+                bench_log(b, "  %s seed %llu: %.3g s, RMSE %s, surface error %s", b->methods[i].text,
+                          (unsigned long long)seed, cp->wall_s, rmse, surf);
             }
             if (b->params.on_run)
                 b->params.on_run(b->params.on_run_ctx, b);
