@@ -3,6 +3,8 @@
 #   make          build ./radpt
 #   make deps     install the Debian packages radpt needs (only when missing)
 #   make test     build and run every test (Criterion)
+#   make check T=NAME   one test suite (or T=suite/test), without make deps
+#   make format   clang-format the sources (.clang-format)
 #   make asan     the same tests under AddressSanitizer + UBSan
 #   make demo     render the built-in Cornell box
 #   make bench    throughput benchmarks on the Cornell box
@@ -50,7 +52,7 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off scenes/data/elephant.off scenes/data/armadillo.off
 
-.PHONY: all deps test check asan demo bench clean meshes fuzz fuzz-deps valgrind
+.PHONY: all deps test check asan demo bench clean meshes fuzz fuzz-deps valgrind format
 all: radpt meshes
 
 radpt: $(BUILD)/radpt
@@ -88,8 +90,14 @@ test: deps
 	@$(MAKE) --no-print-directory check
 
 # Criterion runs each test in its own process; two workers for two cores.
+# `make check T=suite` runs one suite, `make check T=suite/test` one test.
+T ?=
 check: $(BUILD)/tests/run $(BUILD)/radpt meshes
-	$(BUILD)/tests/run --jobs 2
+	$(BUILD)/tests/run --jobs 2 $(if $(T),--filter '$(if $(findstring /,$(T)),$(T),$(T)/*)')
+
+# clang-format on every C, C++ and header file (style: .clang-format).
+format:
+	clang-format -i $$(git ls-files '*.c' '*.h' '*.cpp')
 
 # Criterion's runner itself leaks a few bytes at exit: suppressed by name.
 asan: deps
@@ -125,7 +133,7 @@ bench: deps
 
 # Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
 # for FUZZ_SECONDS; new corpus entries land in tests/fuzz/<target>/.
-FUZZ_SECONDS ?= 60
+FUZZ_SECONDS ?= 600
 FUZZ_BUILD := build-fuzz
 FUZZ_FLAGS := -g -O1 -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
 FUZZ_LIB_OBJ := $(patsubst %.c,$(FUZZ_BUILD)/%.o,$(wildcard geometry/*.c)) $(LIB_CXX:%.cpp=$(FUZZ_BUILD)/%.o)

@@ -474,3 +474,30 @@ Test(import, mesh_zero_area_face_dropped_with_line)
     cr_expect_eq(m.orientation_conflicts, 0, "the dropped face's edge 0-1 is not counted");
     rp_tri_mesh_free(&m);
 }
+
+/* Header counts a file cannot hold are refused with FILE:LINE and the
+ * count, before any reader reserves room for them (the fuzz target found
+ * an OFF header of absurd counts that made CGAL's reader try a huge
+ * allocation).  The bound is the file's own size: no fixed limit. */
+Test(import, absurd_header_counts_are_refused_before_allocation)
+{
+    static const struct {
+        const char *file, *where, *what;
+    } cases[] = {
+        {"huge-vertices.off", "huge-vertices.off:2:", "vertex count 4000000000 is more than the file's"},
+        {"huge-faces.off", "huge-faces.off:2:", "face count 99999999999999 is more than"},
+        {"negative-count.off", "negative-count.off:2:", "'-1' is not a face count"},
+        {"garbage-count.off", "garbage-count.off:2:", "'3x' is not a vertex count"},
+        {"huge-vertices.ply", "huge-vertices.ply:3:", "vertex count 3000000000 is more than"},
+        {"huge-faces-binary.ply", "huge-faces-binary.ply:7:", "face count 99999999999 is more than"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        char path[512], msg[1024];
+        snprintf(path, sizeof path, DATA "bad-mesh/%s", cases[i].file);
+        rp_tri_mesh m;
+        memset(&m, 0, sizeof m);
+        cr_expect_neq(rp_cgal_read_mesh(path, 1, &m, msg, sizeof msg), 0, "%s was accepted", cases[i].file);
+        cr_expect(strstr(msg, cases[i].where) && strstr(msg, cases[i].what), "%s: %s", cases[i].file, msg);
+        rp_tri_mesh_free(&m);
+    }
+}

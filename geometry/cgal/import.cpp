@@ -754,6 +754,98 @@ private:
     }
 };
 
+/* ---- header counts --------------------------------------------------------- */
+
+/* One count of a header: absurd when the file cannot hold that many
+ * entries of at least min_bytes each (scale-free: no fixed limit), or
+ * when it is negative or not a whole number.  Checked before any reader
+ * allocates for it. */
+bool count_fits(const std::string &tok, long long bytes, long long min_bytes, long long *out)
+{
+    if (tok.empty() || tok.find_first_not_of("0123456789") != std::string::npos || tok.size() > 18)
+        return false;
+    const long long v = std::stoll(tok);
+    *out = v;
+    return v <= bytes / min_bytes;
+}
+
+/* Refuses an OFF or PLY header whose vertex or face count the file cannot
+ * hold, with FILE:LINE and the count, before CGAL's reader reserves room
+ * for it: at least 6 bytes a vertex ("x y z" and a newline; 12 in binary)
+ * and 8 a face ("3 a b c" and a newline; 4 in binary PLY). */
+int check_header_counts(const std::string &path, Format fmt, char *msg, size_t msglen)
+{
+    if (fmt != FMT_OFF && fmt != FMT_PLY)
+        return 0;
+    std::ifstream in(path, std::ios::binary | std::ios::ate);
+    if (!in)
+        return 0;
+    const long long bytes = (long long)in.tellg();
+    in.seekg(0);
+    std::string line;
+    std::size_t n = 0;
+    const long long vmin = fmt == FMT_OFF ? 6 : 3, fmin = fmt == FMT_OFF ? 8 : 4;
+    auto check = [&](const std::string &what, const std::string &tok, long long min) -> int {
+        long long v = 0;
+        if (count_fits(tok, bytes, min, &v))
+            return 0;
+        std::string why = tok.find_first_not_of("0123456789") != std::string::npos || tok.empty()
+                              ? "'" + tok + "' is not a " + what + " count (a whole number >= 0)"
+                              : what + " count " + tok + " is more than the file's " + std::to_string(bytes) +
+                                    " bytes can hold (at least " + std::to_string(min) + " bytes a " + what + ")";
+        return fail(msg, msglen, path, n, why);
+    };
+    if (fmt == FMT_OFF) {
+        /* the first line that is not blank or a comment: "OFF" alone or with
+         * the counts, else the counts themselves (keyword optional) */
+        bool keyword_seen = false;
+        while (std::getline(in, line)) {
+            ++n;
+            std::string s = strip_comment(line);
+            if (blank(s))
+                continue;
+            std::istringstream ss(s);
+            std::string a, b, c;
+            ss >> a;
+            if (!keyword_seen && a.size() >= 3 && a.compare(a.size() - 3, 3, "OFF") == 0) {
+                if (a.find("BINARY") != std::string::npos || s.find("BINARY") != std::string::npos)
+                    return 0;
+                keyword_seen = true;
+                if (!(ss >> b))
+                    continue; /* counts on the next line */
+                a = b;
+            }
+            ss >> b;
+            if (int rc = check("vertex", a, vmin))
+                return rc;
+            if (int rc = check("face", b, fmin))
+                return rc;
+            return 0;
+        }
+        return 0;
+    }
+    /* PLY: "element vertex N", "element face N" up to end_header */
+    while (std::getline(in, line)) {
+        ++n;
+        std::istringstream ss(line);
+        std::string key, name, count;
+        ss >> key;
+        if (key == "end_header")
+            break;
+        if (key != "element")
+            continue;
+        ss >> name >> count;
+        if (name == "vertex") {
+            if (int rc = check("vertex", count, vmin))
+                return rc;
+        } else if (name == "face") {
+            if (int rc = check("face", count, fmin))
+                return rc;
+        }
+    }
+    return 0;
+}
+
 /* ---- rp_cgal_read_mesh ---------------------------------------------------- */
 
 int read_mesh(const std::string &path, int reject_degenerate, rp_tri_mesh *out, char *msg,
@@ -767,6 +859,8 @@ int read_mesh(const std::string &path, int reject_degenerate, rp_tri_mesh *out, 
     std::ifstream in(path, std::ios::binary);
     if (!in)
         return fail(msg, msglen, path, 0, std::string("cannot open: ") + std::strerror(errno));
+    if (int rc = check_header_counts(path, fmt, msg, msglen))
+        return rc;
 
     std::vector<Point> points;
     std::vector<Polygon> polygons;
