@@ -1,4 +1,4 @@
-/* The scene model and its two readers: scene format 1 (DESIGN.md, "Scene
+/* The scene model and its two readers: scene format 1 (docs/design.md, "Scene
  * files") and Wavefront OBJ/MTL through the CGAL shim.
  *
  * Choices the format leaves open, made here:

@@ -1,4 +1,4 @@
-/* The scene model both solvers read (DESIGN.md, "Scene model", "Scene files").
+/* The scene model both solvers read (docs/design.md, "Scene model", "Scene files").
  *
  * A scene is surfaces made of planar faces (triangles and convex quads), each
  * surface with one diffuse material (reflectance rho and emitted radiance Le

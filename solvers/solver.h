@@ -1,4 +1,4 @@
-/* The solver interface (DESIGN.md, "The solver interface").
+/* The solver interface (docs/design.md, "The solver interface").
  *
  * A GSL-style type table: each method is one file exporting one const
  * rp_solver_type, and solvers/registry.c maps names to tables.  The harness

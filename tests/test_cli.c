@@ -1,4 +1,4 @@
-/* End-to-end: the radpt command as a user runs it (DESIGN.md, "Command
+/* End-to-end: the radpt command as a user runs it (docs/design.md, "Command
  * line"): exit statuses, one-line errors, JSON, no partial output files. */
 #include <criterion/criterion.h>
 #include <fcntl.h>
@@ -38,7 +38,7 @@ static double surface_area(const char *json, const char *name)
     return surfaces ? rp_json_number_after(surfaces, anchor, "area") : NAN;
 }
 
-/* ground-truth.md, the Cornell box (millimetres). */
+/* docs/ground-truth.md, the Cornell box (millimetres). */
 Test(cli, cornell_info_areas_match_measured_geometry)
 {
     rp_run r = rp_run_radpt("info scenes/cornell.scene --json");
@@ -425,7 +425,7 @@ Test(cli, names_quoted_warnings_listed)
 
 /* An OBJ's groups are surfaces the command line can name: scene.obj's floor
  * and lamp are directly opposed unit squares 1 apart, whose form factor is
- * Howell's C-11 with a = b = c = 1 (data/ground-truth.md). */
+ * Howell's C-11 with a = b = c = 1 (docs/ground-truth.md). */
 Test(cli, formfactor_between_obj_groups)
 {
     rp_run r = rp_run_radpt("formfactor tests/data/scene.obj --from floor --to lamp --method analytic --json");

@@ -3,11 +3,11 @@
  *
  * References the code did not produce: Howell's closed forms C-11 (directly
  * opposed parallel rectangles) and C-14 (perpendicular rectangles sharing
- * an edge), written here from data/ground-truth.md; the differential area
+ * an edge), written here from docs/ground-truth.md; the differential area
  * to a parallel rectangle by superposing the corner form of Howell's
  * catalogue (normal through a corner; Hamilton & Morgan 1952), for the
  * hemicube's point values; the unoccluded Cornell-box form factors quoted
- * in ground-truth.md; closure (row sums of 1) and reciprocity in a closed
+ * in docs/ground-truth.md; closure (row sums of 1) and reciprocity in a closed
  * box.  Rectangle sizes are odd on purpose (0.37, 1.9, 0.61, ...), so a
  * formula that only works for unit squares cannot pass.
  *
@@ -34,7 +34,7 @@
 #include "geometry/scene.h"
 #include "solvers/radiosity/formfactor.h"
 
-/* ---- closed forms (data/ground-truth.md) -------------------------------- */
+/* ---- closed forms (docs/ground-truth.md) -------------------------------- */
 
 /* C-11: directly opposed parallel rectangles a x b at distance c. */
 static double howell_c11(double a, double b, double c)
@@ -211,7 +211,7 @@ static void check_pair_rectangles(double tolerance, double bound)
 
 Test(formfactor, closed_forms_are_right)
 {
-    /* The values ground-truth.md quotes for its own check. */
+    /* The values docs/ground-truth.md quotes for its own check. */
     cr_assert(fabs(howell_c11(1, 1, 1) - 0.1998248957) < 1e-10);
     cr_assert(fabs(howell_c14(1, 1, 1) - 0.2000437761) < 1e-10);
     /* point_rect over a whole rectangle seen from below its centre
@@ -349,7 +349,7 @@ Test(formfactor, analytic_closed_box_closure_and_reciprocity)
     check_box(1e-7, 1e-6, 1e-6);
 }
 
-/* ground-truth.md: the Cornell box's light to the walls, ignoring the
+/* docs/ground-truth.md: the Cornell box's light to the walls, ignoring the
  * blocks (no ray caster), one element per face. */
 Test(formfactor, cornell_light_unoccluded)
 {

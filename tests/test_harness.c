@@ -196,7 +196,7 @@ Test(harness, method_specs)
 
 /* ---------------------------------------------------------- references */
 
-/* data/ground-truth.md, the furnace: rho 0.5, Le 1 -> L = 1 / (1 - 0.5) = 2
+/* docs/ground-truth.md, the furnace: rho 0.5, Le 1 -> L = 1 / (1 - 0.5) = 2
  * at every measured pixel and on every surface, exactly. */
 Test(reference, furnace_is_exact)
 {

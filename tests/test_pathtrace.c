@@ -2,7 +2,7 @@
  * produce.
  *
  * Reference values:
- *  - the furnace, L = Le / (1 - rho) (data/ground-truth.md);
+ *  - the furnace, L = Le / (1 - rho) (docs/ground-truth.md);
  *  - Howell's closed-form form factors C-11 (parallel opposed squares) and
  *    C-14 (perpendicular squares sharing an edge), implemented here and
  *    checked against the catalogue values 0.1998248957 and 0.2000437761;
@@ -202,7 +202,7 @@ static double howell_perpendicular(double w, double h, double l)
 
 Test(pathtrace, howell_formulas_match_catalogue)
 {
-    /* The implementations above against ground-truth.md's values, and the
+    /* The implementations above against docs/ground-truth.md's values, and the
      * closure of the unit cube. */
     cr_assert_float_eq(howell_parallel(1, 1, 1), 0.1998248957, 1e-10);
     cr_assert_float_eq(howell_perpendicular(1, 1, 1), 0.2000437761, 1e-10);

@@ -478,7 +478,7 @@ Test(radiosity, cube_ceiling_refinement, .init = setup, .timeout = 300)
         cr_assert_gt(errs[t - 1], errs[t], "error grew from %dx%d to %dx%d", ks[t - 1], ks[t - 1], ks[t], ks[t]);
     }
     /* Surface averages of piecewise-constant radiosity converge faster
-     * than the O(h) pointwise error (ground-truth.md: about h^1.6 to h^2). */
+     * than the O(h) pointwise error (docs/ground-truth.md: about h^1.6 to h^2). */
     cr_assert_gt(log(errs[0] / errs[NK - 1]) / log((double)ks[NK - 1] / ks[0]), 1.0);
     rp_scene_destroy(sc);
 }

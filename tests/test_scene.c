@@ -179,7 +179,7 @@ Test(scene, camera)
 /* ------------------------------------------------------------ Cornell */
 
 /* Areas of every Cornell surface from the measured coordinates
- * (data/ground-truth.md), by formulas independent of scene.c's. */
+ * (docs/ground-truth.md), by formulas independent of scene.c's. */
 Test(scene, cornell_areas)
 {
     rp_scene *s = load_ok("scenes/cornell.scene");
@@ -395,7 +395,7 @@ Test(scene, cornell_spectral)
     for (int i = 0; i < 16; i++)
         cr_assert_eq(rp_scene_wavelengths(s)[i], 400.0 + 20 * i);
     const rp_material *m = rp_scene_materials(s);
-    /* Measured white at 400 and 420 nm (ground-truth.md, values 1 and 6):
+    /* Measured white at 400 and 420 nm (docs/ground-truth.md, values 1 and 6):
      * .343, .687; red at 700 nm (value 76): .642; light at 520 nm:
      * 8 + 0.2 * 7.6 = 9.52. */
     cr_assert_str_eq(m[0].name, "white");

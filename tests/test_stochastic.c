@@ -101,7 +101,7 @@ static rp_scene *cube_patches(int mixed, double *mean_le)
 }
 
 /* Howell's catalog C-11: directly opposed parallel a x b rectangles at
- * distance c (data/ground-truth.md). */
+ * distance c (docs/ground-truth.md). */
 static double howell_parallel(double a, double b, double c)
 {
     double X = a / c, Y = b / c, X2 = X * X, Y2 = Y * Y;

@@ -202,7 +202,7 @@ static void options_text(const rp_cli *cli, char *buf, size_t n)
                                  cli->values[i]);
 }
 
-/* Channel names and planes for a scene's bands (DESIGN.md, "Images"). */
+/* Channel names and planes for a scene's bands (docs/design.md, "Images"). */
 typedef struct image_planes {
     size_t nchannels;
     char **names;

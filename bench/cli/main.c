@@ -1,4 +1,4 @@
-/* radpt: the command-line front (DESIGN.md, "Command line"). */
+/* radpt: the command-line front (docs/design.md, "Command line"). */
 #include <gsl/gsl_errno.h>
 #include <stdio.h>
 #include <string.h>

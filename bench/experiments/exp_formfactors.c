@@ -24,7 +24,7 @@
 /* ---------------------------------------------------------- formfactors */
 
 /* Howell's catalog C-11: parallel, directly opposed rectangles a x b at
- * distance c (data/ground-truth.md). */
+ * distance c (docs/ground-truth.md). */
 double howell_parallel(double a, double b, double c)
 {
     double X = a / c, Y = b / c;

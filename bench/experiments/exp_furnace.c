@@ -254,7 +254,7 @@ rp_status rp_exp_furnace(const rp_experiment_params *p, rp_error *err)
         FILE *f = o.f;
         fprintf(f, "# Experiment furnace: reflectance sweep\n\n"
                    "A closed unit box, every face with reflectance rho and emitted radiance 1, so the exact answer "
-                   "is L = 1 / (1 - rho) everywhere (data/ground-truth.md). Each method runs until its surface "
+                   "is L = 1 / (1 - rho) everywhere (docs/ground-truth.md). Each method runs until its surface "
                    "average is within a relative error of %g (radiosity: the actual error; path tracer: its "
                    "estimated relative standard error, the rule a Monte Carlo run can apply), or %g s of solver "
                    "time. Radiosity uses 150 elements (%zu made) and analytic form factors to 1e-8 (a row-sum error "

@@ -160,7 +160,7 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
                    "size, scored against the path-traced reference `%s` (RMSE standard error %.3g). The image is "
                    "reconstructed flat (element values) or Gouraud (vertex-interpolated); the surface error is the "
                    "RMS relative error of surface averages. Piecewise-constant radiosity has pointwise error O(h) "
-                   "away from edges; surface averages converge faster (data/ground-truth.md). Observed order: the "
+                   "away from edges; surface averages converge faster (docs/ground-truth.md). Observed order: the "
                    "slope of log error against log h.\n\n",
                 ref->exr_path, ref->rmse_se);
         if (p->command)

@@ -8,7 +8,7 @@
  * a non-finite one fails the experiment (RP_ERR_RUNTIME) after the report
  * is written, with the offending quantity named.
  *
- * Sections (closed forms from data/ground-truth.md and Howell's catalog):
+ * Sections (closed forms from docs/ground-truth.md and Howell's catalog):
  *   1 reflectance -> 1 in a closed room (the furnace, L = Le / (1 - rho));
  *   2 a shrinking light at constant power;
  *   3 corners and nearly touching surfaces (C-11, C-14 and superposition);

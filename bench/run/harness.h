@@ -1,6 +1,6 @@
 /* The benchmark harness: runs solvers through the solver interface with
  * checkpoints spaced geometrically in time and scores every checkpoint
- * against a reference (DESIGN.md, "The solver interface": the harness alone
+ * against a reference (docs/design.md, "The solver interface": the harness alone
  * owns clocks and references).
  *
  * Clocks: a run's solver time is the wall time spent in rp_solver_create

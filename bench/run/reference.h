@@ -1,9 +1,9 @@
-/* References: the converged answer a run is scored against (DESIGN.md,
+/* References: the converged answer a run is scored against (docs/design.md,
  * "Ground truth").
  *
  * Two kinds:
  *   exact     - the scene has a closed form.  The furnace (data/
- *               ground-truth.md): a closed enclosure, seen from inside,
+ *               docs/ground-truth.md): a closed enclosure, seen from inside,
  *               whose surfaces all share one reflectance rho and one
  *               emitted radiance Le, has L = Le / (1 - rho) everywhere.
  *               Detected from the scene itself (closedness, orientation,

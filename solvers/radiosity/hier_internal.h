@@ -254,7 +254,7 @@ rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2);
  * a point uniform in area. */
 int hier_polygon_prepare(const rp_vec3 *poly, int m, double *cum);
 rp_vec3 hier_polygon_point(const rp_vec3 *poly, int m, const double *cum, double u1, double u2);
-/* Lambert's contour integral (ground-truth.md): the form factor from a
+/* Lambert's contour integral (docs/ground-truth.md): the form factor from a
  * differential area at x with unit normal n to polygon poly[0..m-1],
  * clipped to the half-space in front of x's tangent plane. */
 double hier_point_polygon(rp_vec3 x, rp_vec3 n, const rp_vec3 *poly, int m);
