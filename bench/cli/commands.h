@@ -11,5 +11,6 @@ int rp_cmd_samplers(int argc, char **argv);
 int rp_cmd_reference(int argc, char **argv);
 int rp_cmd_bench(int argc, char **argv);
 int rp_cmd_experiment(int argc, char **argv);
+int rp_cmd_compare(int argc, char **argv);
 
 #endif

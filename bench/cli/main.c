@@ -60,6 +60,11 @@ static void print_usage(FILE *f)
           "  radpt samplers SCENE [--spp N] [--seeds N] [--reference-spp N] [--json]\n"
           "      random, stratified and Sobol' sampling: RMSE against a reference rendered\n"
           "      with another seed, and MSE x seconds, which ranks them at equal time\n"
+          "  radpt compare A.exr B.exr [--json] [-o DIFF.png] [--scene SCENE [--camera WORDS]]\n"
+          "      image A against the reference B with the benchmarks' metrics (RMSE, relMSE with\n"
+          "      eps 0.01, MAE over every channel of R,G,B or Y; per-channel means and their ratio;\n"
+          "      the largest difference and where); half or float EXRs from any renderer;\n"
+          "      --scene: only the pixels benchmarks measure; -o: false-colour A - B\n"
           "  radpt help [METHOD | experiment NAME]\n"
           "      this text, a method's options, or what an experiment runs and checks\n"
           "  radpt --version\n"
@@ -129,7 +134,7 @@ int main(int argc, char **argv)
     gsl_set_error_handler_off();
     if (argc < 2) {
         fprintf(stderr, "radpt: no command; usage: radpt info|render|probe|reference|bench|experiment|"
-                        "formfactor|throughput|samplers|help|--version ... (see radpt help)\n");
+                        "formfactor|throughput|samplers|compare|help|--version ... (see radpt help)\n");
         return 2;
     }
     const char *cmd = argv[1];
@@ -172,6 +177,8 @@ int main(int argc, char **argv)
         return rp_cmd_throughput(argc, argv);
     if (!strcmp(cmd, "samplers"))
         return rp_cmd_samplers(argc, argv);
+    if (!strcmp(cmd, "compare"))
+        return rp_cmd_compare(argc, argv);
     fprintf(stderr, "radpt: unknown command '%s' (see radpt help)\n", cmd);
     return 2;
 }
