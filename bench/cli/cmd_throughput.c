@@ -19,6 +19,8 @@
 #include "solvers/solver.h"
 #include "bench/cli/cli.h"
 #include "bench/cli/commands.h"
+#include "bench/run/metrics.h"
+#include "bench/run/reference.h"
 #include "bench/run/raybench.h"
 
 static int parse_count(const rp_cli *cli, const char *name, unsigned long fallback, unsigned long *out)
@@ -138,7 +140,7 @@ int rp_cmd_throughput(int argc, char **argv)
 
 int rp_cmd_samplers(int argc, char **argv)
 {
-    static const char *const extra[] = {"spp", "reference-spp", "seeds", NULL};
+    static const char *const extra[] = {"spp", "reference-spp", "seeds", "cache", NULL};
     rp_cli cli = {.command = "samplers"};
     int rc = rp_cli_parse(&cli, argc, argv, extra, 0);
     if (rc)
@@ -149,25 +151,28 @@ int rp_cmd_samplers(int argc, char **argv)
         return rc;
     rp_error err;
     rp_scene *scene = NULL;
-    float *ref = NULL, *img = NULL;
+    rp_reference *ref = NULL;
+    float *img = NULL;
     rp_status st = rp_load_scene(cli.scene, cli.camera, 1, &scene, &err);
     const rp_camera *cam = scene ? rp_scene_camera(scene) : NULL;
     if (st == RP_OK && !cam)
         st = rp_error_set(&err, RP_ERR_INPUT, "%s: the scene has no camera", cli.scene);
-    size_t n = cam ? (size_t)cam->width * cam->height * rp_scene_nbands(scene) : 0;
+    size_t nb = scene ? rp_scene_nbands(scene) : 0, npix = cam ? (size_t)cam->width * cam->height : 0;
+    if (st == RP_OK && !(img = malloc(npix * nb * sizeof *img)))
+        st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory");
+    /* The reference, the pixels and the metric are the benchmarks': the
+     * cached reference of this many spp (bench/run/reference.h), its mask
+     * of measured pixels (light and silhouette pixels out), and
+     * rp_metrics_image.  So this RMSE is the one `radpt bench`, `radpt
+     * experiment samplers` and `radpt compare --scene` report. */
     if (st == RP_OK) {
-        ref = malloc(n * sizeof *ref);
-        img = malloc(n * sizeof *img);
-        if (!ref || !img)
-            st = rp_error_set(&err, RP_ERR_NOMEM, "out of memory");
+        rp_reference_params rp = {.size = sizeof rp, .spp = ref_spp, .threads = cli.threads,
+                                  .cache_dir = rp_cli_extra(&cli, "cache")};
+        st = rp_reference_get(scene, cli.scene, &rp, &ref, &err);
+        if (st == RP_OK && !ref->radiance)
+            st = rp_error_set(&err, RP_ERR_INPUT, "%s: the reference has no image", cli.scene);
     }
-    double rays, paths, secs, samples, ref_secs = 0;
-    if (st == RP_OK) {
-        rp_cli_note("reference: sobol, %lu spp...", ref_spp);
-        /* a seed no run below uses */
-        st = render(scene, "sobol", ref_spp, 0, cli.seed + 1000003, cli.threads, ref, &rays, &paths,
-                    &ref_secs, &samples, &err);
-    }
+    double rays, paths, secs, samples;
     /* Each sampler renders the same spp; at equal time the error of an
      * unbiased estimator scales as MSE * seconds (its inverse is the usual
      * efficiency, Veach 1997 sec. 2.4 / Pharr et al.), so that product ranks
@@ -175,25 +180,31 @@ int rp_cmd_samplers(int argc, char **argv)
     static const char *const names[] = {"random", "stratified", "sobol"};
     double eff[3] = {0};
     if (st == RP_OK && !cli.json)
-        printf("# %s, %lu spp, %lu seeds; reference %lu spp (sobol, other seed, %.1f s)\n"
-               "# MSE x s: mean squared error times render seconds (lower wins at equal time)\n"
+        printf("# %s, %lu spp, %lu seeds; reference %s (%lu spp, %s); RMSE over its %zu measured pixels\n"
+               "# (the benchmarks' metric: radpt help compare); MSE x s: mean squared error times render\n"
+               "# seconds (lower wins at equal time)\n"
                "%-12s %8s %12s %12s %12s %12s\n",
-               cli.scene, spp, nseeds, ref_spp, ref_secs, "sampler", "seconds", "RMSE", "RMSE sd",
-               "MSE x s", "vs random");
-    if (st == RP_OK && cli.json)
-        printf("{\"scene\": \"%s\", \"spp\": %lu, \"seeds\": %lu, \"reference_spp\": %lu, \"samplers\": [",
-               cli.scene, spp, nseeds, ref_spp);
+               cli.scene, spp, nseeds, ref->exr_path, ref->spp, ref->cached ? "cached" : "made now", ref->mask_count,
+               "sampler", "seconds", "RMSE", "RMSE sd", "MSE x s", "vs random");
+    if (st == RP_OK && cli.json) {
+        printf("{\"scene\": ");
+        rp_json_string(stdout, cli.scene);
+        printf(", \"spp\": %lu, \"seeds\": %lu, \"reference_spp\": %lu, \"reference\": ", spp, nseeds, ref->spp);
+        rp_json_string(stdout, ref->exr_path);
+        printf(", \"measured_pixels\": %zu, \"samplers\": [", ref->mask_count);
+    }
     for (int k = 0; k < 3 && st == RP_OK; k++) {
         double sum = 0, sum2 = 0, mse_sum = 0, sec_sum = 0;
         for (unsigned long s = 0; s < nseeds && st == RP_OK; s++) {
             rp_cli_note("%s, seed %lu...", names[k], cli.seed + s);
             st = render(scene, names[k], spp, 0, cli.seed + s, cli.threads, img, &rays, &paths, &secs,
                         &samples, &err);
-            double se = 0;
-            for (size_t i = 0; i < n; i++)
-                se += ((double)img[i] - ref[i]) * ((double)img[i] - ref[i]);
-            double mse = se / (double)n;
-            sum += sqrt(mse);
+            if (st != RP_OK)
+                break;
+            rp_image_metrics m;
+            rp_metrics_image(img, ref->radiance, ref->mask, npix, nb, &m);
+            double mse = m.rmse * m.rmse;
+            sum += m.rmse;
             sum2 += mse;
             mse_sum += mse;
             sec_sum += secs;
@@ -215,7 +226,7 @@ int rp_cmd_samplers(int argc, char **argv)
     }
     if (st == RP_OK && cli.json)
         printf("]}\n");
-    free(ref);
+    rp_reference_destroy(ref);
     free(img);
     rp_scene_destroy(scene);
     return st == RP_OK ? 0 : rp_cli_fail(st, &err);
