@@ -4,6 +4,7 @@
  * met or the --time budget runs out, then estimate once; the cost of the
  * estimate is not solver time. */
 #include <math.h>
+#include <omp.h>
 #include <signal.h>
 #include <stdatomic.h>
 #include <stdio.h>
@@ -15,6 +16,7 @@
 #include "bench/cli/cli.h"
 #include "bench/cli/commands.h"
 #include "bench/report/image.h"
+#include "bench/run/driver.h"
 #include "bench/run/resume.h"
 #include "bench/report/spectrum.h"
 
@@ -34,17 +36,6 @@ static void on_signal(int sig)
     atomic_store_explicit(&interrupted, 1, memory_order_relaxed);
 }
 
-/* Why run_solver's loop ended. */
-typedef enum run_stop { RUN_RULE, RUN_TIME, RUN_SIGNAL } run_stop;
-
-typedef struct run_totals {
-    rp_step_info sum;   /* rays, paths, form factors, iterations added up */
-    rp_step_info last;  /* the last step's residual, unshot, progress */
-    double seconds;
-    size_t steps;
-    run_stop stop;
-} run_totals;
-
 /* render --checkpoint / --resume (resume.h). */
 typedef struct run_ckpt {
     const char *path;       /* --checkpoint FILE, NULL: none */
@@ -56,7 +47,7 @@ typedef struct run_ckpt {
 
 /* Writes the checkpoint; the time it takes is not solver time (returned
  * in *spent). */
-static rp_status write_ckpt(run_ckpt *ck, const rp_solver *solver, const run_totals *tot, double *spent,
+static rp_status write_ckpt(run_ckpt *ck, const rp_solver *solver, const rp_drive_totals *tot, double *spent,
                             rp_error *err)
 {
     double t = rp_clock();
@@ -65,69 +56,57 @@ static rp_status write_ckpt(run_ckpt *ck, const rp_solver *solver, const run_tot
     ck->info.rays = tot->sum.rays;
     ck->info.paths = tot->sum.paths;
     ck->info.form_factors = tot->sum.form_factors;
-    ck->info.seconds = tot->seconds;
+    ck->info.seconds = tot->wall_s;
     rp_status st = rp_resume_save(ck->path, &ck->info, solver, err);
     ck->written += st == RP_OK;
     *spent += rp_clock() - t;
     return st;
 }
 
-/* tot comes in zeroed, or with a resumed run's totals, which it carries on
- * (seconds included; --time counts this run's seconds only). */
+/* render's periodic state saving, after a step of the driver (not after
+ * the last: that one is saved once the run has ended). */
+typedef struct saving {
+    run_ckpt *ck;
+    double last;
+} saving;
+
+static int save_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp_status *st, rp_error *err)
+{
+    saving *sv = ctx;
+    double excluded = 0;
+    if (sv->ck && sv->ck->path && t->stop == RP_STOP_NONE && rp_clock() - sv->last >= sv->ck->every) {
+        *st = write_ckpt(sv->ck, s, t, &excluded, err);
+        sv->last = rp_clock();
+    }
+    return 0;
+}
+
+static void bar_progress(void *ctx, double fraction, const char *detail)
+{
+    rp_progress_update(ctx, fraction, detail);
+}
+
+/* Runs the solver through the driver (bench/run/driver.h): to the method's
+ * rule, --time (this run's seconds only) or a signal.  tot comes in zeroed,
+ * or with a resumed run's totals, which it carries on. */
 static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *label,
-                            run_totals *tot, run_ckpt *ck, rp_error *err)
+                            rp_drive_totals *tot, run_ckpt *ck, rp_error *err)
 {
     rp_progress bar;
     rp_progress_begin(&bar, label);
-    const double seconds0 = tot->seconds;
-    double t0 = rp_clock(), excluded = 0, last_ckpt = t0;
+    double excluded = 0;
     if (ck && ck->converged) {
         rp_progress_end(&bar);
         return ck->path ? write_ckpt(ck, solver, tot, &excluded, err) : RP_OK;
     }
-    for (;;) {
-        rp_step_info info;
-        rp_status st = rp_solver_step(solver, &info, err);
-        if (st != RP_OK) {
-            rp_progress_end(&bar);
-            return st;
-        }
-        tot->steps++;
-        tot->sum.rays += info.rays;
-        tot->sum.paths += info.paths;
-        tot->sum.form_factors += info.form_factors;
-        tot->sum.iterations += info.iterations;
-        tot->last = info;
-        double now = rp_clock(), run_s = now - t0 - excluded;
-        tot->seconds = seconds0 + run_s;
-        double frac = info.progress;
-        if (cli->time_budget > 0 && run_s / cli->time_budget > frac)
-            frac = run_s / cli->time_budget;
-        char detail[96];
-        snprintf(detail, sizeof detail, "%.0f iterations, %.1f s", tot->sum.iterations, tot->seconds);
-        rp_progress_update(&bar, frac, detail);
-        if (atomic_load(&interrupted)) {
-            tot->stop = RUN_SIGNAL;
-            break;
-        }
-        if (info.converged) {
-            tot->stop = RUN_RULE;
-            break;
-        }
-        if (cli->time_budget > 0 && run_s >= cli->time_budget) {
-            tot->stop = RUN_TIME;
-            break;
-        }
-        if (ck && ck->path && now - last_ckpt >= ck->every) {
-            rp_status st = write_ckpt(ck, solver, tot, &excluded, err);
-            if (st != RP_OK) {
-                rp_progress_end(&bar);
-                return st;
-            }
-            last_ckpt = rp_clock();
-        }
-    }
+    saving sv = {.ck = ck, .last = rp_clock()};
+    rp_drive_params dp = {.size = sizeof dp, .budget = cli->time_budget, .stop_at_rule = 1, .cancel = &interrupted,
+                          .after_step = save_after_step, .ctx = &sv, .progress = bar_progress,
+                          .progress_ctx = &bar};
+    rp_status st = rp_drive(solver, &dp, tot, err);
     rp_progress_end(&bar);
+    if (st != RP_OK)
+        return st;
     /* the last state, whether converged, out of time or interrupted */
     return ck && ck->path ? write_ckpt(ck, solver, tot, &excluded, err) : RP_OK;
 }
@@ -168,7 +147,7 @@ typedef struct run_convergence {
 /* Fills c; for a run that stopped short of its tolerance, warns on stderr
  * "radpt: warning: METHOD stopped by WHAT after N UNIT, residual R >
  * tolerance T: not converged". */
-static void run_convergence_report(const rp_cli *cli, const run_totals *tot, run_convergence *c)
+static void run_convergence_report(const rp_cli *cli, const rp_drive_totals *tot, run_convergence *c)
 {
     const rp_solver_type *t = rp_solver_lookup(cli->method);
     c->residual = tot->last.residual;
@@ -178,12 +157,12 @@ static void run_convergence_report(const rp_cli *cli, const run_totals *tot, run
     int given = 0;
     for (size_t i = 0; i < cli->noptions; i++)
         given |= strcmp(cli->keys[i], "max-iterations") == 0;
-    const char *why = tot->stop == RUN_TIME ? "--time"
-                      : tot->stop == RUN_SIGNAL ? "a signal"
+    const char *why = tot->stop == RP_STOP_BUDGET ? "--time"
+                      : tot->stop == RP_STOP_SIGNAL ? "a signal"
                       : given ? "--max-iterations"
                               : "its default --max-iterations";
-    c->stopped_by = tot->stop == RUN_TIME ? "time"
-                    : tot->stop == RUN_SIGNAL ? "signal"
+    c->stopped_by = tot->stop == RP_STOP_BUDGET ? "time"
+                    : tot->stop == RP_STOP_SIGNAL ? "signal"
                     : c->converged || !c->known ? "rule"
                                                 : "iterations";
     if (c->known && !c->converged)
@@ -346,7 +325,7 @@ int rp_cmd_render(int argc, char **argv)
     st = rp_solver_create(rp_solver_lookup(cli.method), scene, &opts, &solver, &err);
     if (st != RP_OK)
         goto done;
-    run_totals tot;
+    rp_drive_totals tot;
     memset(&tot, 0, sizeof tot);
     run_ckpt ck;
     memset(&ck, 0, sizeof ck);
@@ -368,12 +347,12 @@ int rp_cmd_render(int argc, char **argv)
         st = rp_resume_load(resume_path, &ck.info, &got, solver, &last, &err);
         if (st != RP_OK)
             goto done;
-        tot.steps = (size_t)got.steps;
+        tot.steps = got.steps;
         tot.sum.iterations = got.iterations;
         tot.sum.rays = got.rays;
         tot.sum.paths = got.paths;
         tot.sum.form_factors = got.form_factors;
-        tot.seconds = got.seconds;
+        tot.wall_s = got.seconds;
         tot.last = last;
         ck.converged = last.converged;
     }
@@ -408,8 +387,8 @@ int rp_cmd_render(int argc, char **argv)
     rp_scene_hash(scene, hash);
     snprintf(seed, sizeof seed, "%llu", (unsigned long long)cli.seed);
     snprintf(samples, sizeof samples, "%.17g", est.samples);
-    snprintf(seconds, sizeof seconds, "%.6f", tot.seconds);
-    snprintf(threads, sizeof threads, "%d", cli.threads);
+    snprintf(seconds, sizeof seconds, "%.6f", tot.wall_s);
+    snprintf(threads, sizeof threads, "%d", cli.threads ? cli.threads : omp_get_max_threads());
     snprintf(rays, sizeof rays, "%.17g", tot.sum.rays);
     options_text(&cli, optstr, sizeof optstr);
     snprintf(residual, sizeof residual, "%.17g", conv.residual);
@@ -453,11 +432,11 @@ int rp_cmd_render(int argc, char **argv)
         rp_cli_note("radpt: %s: exposure %s", pngs[k], note);
     }
     printf("wrote %s: %u x %u, %s, %.17g samples, %.3f s", cli.out, cam->width, cam->height,
-           cli.method, est.samples, tot.seconds);
-    if (tot.sum.rays > 0 && tot.seconds > 0)
-        printf(", %.3g rays/s", tot.sum.rays / tot.seconds);
-    if (tot.sum.paths > 0 && tot.seconds > 0)
-        printf(", %.3g paths/s", tot.sum.paths / tot.seconds);
+           cli.method, est.samples, tot.wall_s);
+    if (tot.sum.rays > 0 && tot.wall_s > 0)
+        printf(", %.3g rays/s", tot.sum.rays / tot.wall_s);
+    if (tot.sum.paths > 0 && tot.wall_s > 0)
+        printf(", %.3g paths/s", tot.sum.paths / tot.wall_s);
     if (tot.sum.form_factors > 0)
         printf(", %.4g form factors", tot.sum.form_factors);
     if (tot.last.memory > 0)
@@ -501,7 +480,7 @@ int rp_cmd_probe(int argc, char **argv)
     st = rp_solver_create(rp_solver_lookup(cli.method), scene, &opts, &solver, &err);
     if (st != RP_OK)
         goto done;
-    run_totals tot;
+    rp_drive_totals tot;
     memset(&tot, 0, sizeof tot);
     st = run_solver(solver, &cli, "probe", &tot, NULL, &err);
     if (st != RP_OK)
@@ -536,7 +515,7 @@ int rp_cmd_probe(int argc, char **argv)
         rp_json_string(stdout, cli.method);
         printf(", \"seed\": %llu, \"samples\": %.17g, \"seconds\": %.6f, \"rays\": %.17g, "
                "\"form_factors\": %.17g, \"memory_bytes\": %.17g",
-               (unsigned long long)cli.seed, est.samples, tot.seconds, tot.sum.rays, tot.sum.form_factors,
+               (unsigned long long)cli.seed, est.samples, tot.wall_s, tot.sum.rays, tot.sum.form_factors,
                tot.last.memory);
         /* null where the method has no residual and tolerance */
         if (conv.known)
@@ -558,7 +537,7 @@ int rp_cmd_probe(int argc, char **argv)
         }
         printf("]}\n");
     } else {
-        printf("# %s, method %s, %.17g samples, %.3f s", cli.scene, cli.method, est.samples, tot.seconds);
+        printf("# %s, method %s, %.17g samples, %.3f s", cli.scene, cli.method, est.samples, tot.wall_s);
         if (tot.last.memory > 0)
             printf(", %.1f MiB held by the method", tot.last.memory / 1048576.0);
         printf("; radiance W sr^-1 m^-2 per band +- standard error\n");

@@ -194,13 +194,58 @@ static rp_status measure(run_ctx *c, rp_checkpoint *cp, rp_error *err)
     return RP_OK;
 }
 
+/* The harness's checkpoints: checkpoint k at the first step boundary where
+ * the clock (solver seconds, or iterations) >= budget * 2^-k, k = levels -
+ * 1 .. 0; when one step passes several thresholds only the last of them is
+ * recorded; the run's last step (its rule or its budget) is recorded as the
+ * next k. */
+typedef struct checkpointing {
+    run_ctx *c;
+    rp_trial *run;
+    const rp_harness_params *hp;
+    double budget;
+    int k;
+} checkpointing;
+
+static int checkpoint_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp_status *st, rp_error *err)
+{
+    (void)s;
+    checkpointing *ck = ctx;
+    const int done = t->stop != RP_STOP_NONE;
+    const double clock = ck->hp->schedule == RP_SCHEDULE_ITERATIONS ? t->sum.iterations : t->wall_s;
+    if (!(clock >= ldexp(ck->budget, -ck->k)) && !done)
+        return 0;
+    while (ck->k > 0 && clock >= ldexp(ck->budget, -(ck->k - 1)))
+        ck->k--;
+    rp_checkpoint *cp = &ck->run->cp[ck->run->ncp];
+    cp->index = ck->k;
+    cp->target = ldexp(ck->budget, -ck->k);
+    cp->wall_s = t->wall_s;
+    cp->cpu_s = t->cpu_s;
+    cp->steps = t->steps;
+    cp->rays = t->sum.rays;
+    cp->paths = t->sum.paths;
+    cp->iterations = t->sum.iterations;
+    cp->form_factors = t->sum.form_factors;
+    cp->residual = t->last.residual;
+    cp->unshot = t->last.unshot;
+    cp->converged = t->last.converged;
+    cp->peak_rss_mb = rp_peak_rss_mb();
+    cp->solver_mb = t->last.memory / (1024.0 * 1024.0);
+    if ((*st = measure(ck->c, cp, err)) != RP_OK)
+        return 1;
+    ck->run->ncp++;
+    ck->k--;
+    /* the last checkpoint taken: the run ends here */
+    return ck->k < 0;
+}
+
 rp_status rp_harness_run(const rp_scene *scene, const rp_reference *ref, const rp_method_spec *m,
                          uint64_t seed, const rp_harness_params *hp, rp_trial *run, rp_error *err)
 {
     memset(run, 0, sizeof *run);
     run->seed = seed;
     const unsigned levels = hp->levels ? hp->levels : 9;
-    const double budget = hp->budget;
     run_ctx c = {.scene = scene, .ref = ref, .nb = rp_scene_nbands(scene), .ns = rp_scene_nsurfaces(scene)};
     const rp_camera *cam = rp_scene_camera(scene);
     c.npix = cam && ref->radiance ? (size_t)cam->width * cam->height : 0;
@@ -224,71 +269,20 @@ rp_status rp_harness_run(const rp_scene *scene, const rp_reference *ref, const r
     rp_error rerr;
     rp_error_clear(&rerr);
     rp_peak_rss_reset();
-    double wall = 0, cpu = 0, t0 = rp_clock(), c0 = rp_cpu_clock();
-    rp_status st = rp_solver_create(m->type, scene, &o, &c.solver, &rerr);
-    wall += rp_clock() - t0;
-    cpu += rp_cpu_clock() - c0;
-
-    rp_step_info sum = {0}, last = {0};
-    double steps = 0;
-    int k = (int)levels - 1;
-    while (st == RP_OK && k >= 0) {
-        rp_step_info info;
-        memset(&info, 0, sizeof info);
-        t0 = rp_clock();
-        c0 = rp_cpu_clock();
-        st = rp_solver_step(c.solver, &info, &rerr);
-        wall += rp_clock() - t0;
-        cpu += rp_cpu_clock() - c0;
-        if (st != RP_OK)
-            break;
-        if (rp_cancelled(hp->cancel)) {
-            st = rp_error_set(&rerr, RP_ERR_INTERRUPTED, "interrupted");
-            break;
-        }
-        steps++;
-        sum.rays += info.rays;
-        sum.paths += info.paths;
-        sum.form_factors += info.form_factors;
-        sum.iterations += info.iterations;
-        last = info;
-        double clock = hp->schedule == RP_SCHEDULE_ITERATIONS ? sum.iterations : wall;
-        int done = clock >= budget || (hp->stop_when_converged && info.converged);
-        if (hp->progress) {
-            char detail[160];
-            snprintf(detail, sizeof detail, "%.80s seed %llu: %.3g s, %.0f iterations", m->text,
-                     (unsigned long long)seed, wall, sum.iterations);
-            hp->progress(hp->progress_ctx, clock / budget, detail);
-        }
-        double target = ldexp(budget, -k);
-        if (!(clock >= target) && !done)
-            continue;
-        /* the last threshold this step passed */
-        while (k > 0 && clock >= ldexp(budget, -(k - 1)))
-            k--;
-        rp_checkpoint *cp = &run->cp[run->ncp];
-        cp->index = k;
-        cp->target = ldexp(budget, -k);
-        cp->wall_s = wall;
-        cp->cpu_s = cpu;
-        cp->steps = steps;
-        cp->rays = sum.rays;
-        cp->paths = sum.paths;
-        cp->iterations = sum.iterations;
-        cp->form_factors = sum.form_factors;
-        cp->residual = last.residual;
-        cp->unshot = last.unshot;
-        cp->converged = last.converged;
-        cp->peak_rss_mb = rp_peak_rss_mb();
-        cp->solver_mb = last.memory / (1024.0 * 1024.0);
-        st = measure(&c, cp, &rerr);
-        if (st != RP_OK)
-            break;
-        run->ncp++;
-        k--;
-        if (done)
-            break;
-    }
+    rp_drive_totals tot;
+    memset(&tot, 0, sizeof tot);
+    rp_status st = rp_drive_create(m->type, scene, &o, &c.solver, &tot, &rerr);
+    checkpointing ck = {.c = &c, .run = run, .hp = hp, .budget = hp->budget, .k = (int)levels - 1};
+    char label[200];
+    snprintf(label, sizeof label, "%.80s seed %llu", m->text, (unsigned long long)seed);
+    rp_drive_params dp = {.size = sizeof dp, .budget = hp->budget, .schedule = hp->schedule,
+                          .budget_base = tot.wall_s, .stop_at_rule = hp->stop_when_converged,
+                          .cancel = hp->cancel, .after_step = checkpoint_after_step, .ctx = &ck,
+                          .progress = hp->progress, .progress_ctx = hp->progress_ctx, .label = label};
+    if (st == RP_OK)
+        st = rp_drive(c.solver, &dp, &tot, &rerr);
+    if (st == RP_OK && tot.stop == RP_STOP_SIGNAL)
+        st = rp_error_set(&rerr, RP_ERR_INTERRUPTED, "interrupted");
     if (run->ncp)
         run->cp[run->ncp - 1].final = 1;
     if (st == RP_OK && hp->keep_image && c.image) {

@@ -27,6 +27,7 @@
 #include "geometry/scene.h"
 #include "solvers/solver.h"
 #include "bench/run/clock.h"
+#include "bench/run/driver.h"
 #include "bench/run/journal.h"
 #include "bench/run/metrics.h"
 #include "bench/run/reference.h"
@@ -79,10 +80,6 @@ typedef struct rp_checkpoint {
     int converged, final;
 } rp_checkpoint;
 
-typedef enum rp_schedule {
-    RP_SCHEDULE_TIME,       /* budget in seconds of solver time */
-    RP_SCHEDULE_ITERATIONS  /* budget in the method's iterations (steps' sum) */
-} rp_schedule;
 
 typedef struct rp_harness_params {
     size_t size;            /* sizeof(rp_harness_params) */

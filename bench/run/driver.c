@@ -1,0 +1,86 @@
+/* The one driver (driver.h). */
+#include "bench/run/driver.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "bench/run/clock.h"
+
+rp_status rp_drive_create(const rp_solver_type *type, const rp_scene *scene, const rp_options *options,
+                          rp_solver **out, rp_drive_totals *tot, rp_error *err)
+{
+    double t0 = rp_clock(), c0 = rp_cpu_clock();
+    rp_status st = rp_solver_create(type, scene, options, out, err);
+    tot->wall_s += rp_clock() - t0;
+    tot->cpu_s += rp_cpu_clock() - c0;
+    return st;
+}
+
+/* "label: 120 iterations, 3.2 s, ETA 5 s" */
+static void report(const rp_drive_params *p, const rp_drive_totals *tot, double fraction, double spent,
+                   const char *unit)
+{
+    char eta[48] = "";
+    if (fraction > 0.01 && fraction < 1)
+        snprintf(eta, sizeof eta, ", ETA %.0f s", spent * (1 - fraction) / fraction);
+    char detail[200];
+    snprintf(detail, sizeof detail, "%s%s%.0f %s, %.3g s%s", p->label ? p->label : "", p->label ? ": " : "",
+             tot->sum.iterations, unit, tot->wall_s, eta);
+    p->progress(p->progress_ctx, fraction, detail);
+}
+
+rp_status rp_drive(rp_solver *s, const rp_drive_params *p, rp_drive_totals *tot, rp_error *err)
+{
+    const char *unit = rp_solver_type_of(s)->iteration_name ? rp_solver_type_of(s)->iteration_name : "iterations";
+    double spent = 0, last_report = -1, start = rp_clock();
+    const double iter0 = tot->sum.iterations;
+    tot->stop = RP_STOP_NONE;
+    rp_status st = RP_OK;
+    while (st == RP_OK && tot->stop == RP_STOP_NONE) {
+        rp_step_info info;
+        memset(&info, 0, sizeof info);
+        double t0 = rp_clock(), c0 = rp_cpu_clock();
+        st = rp_solver_step(s, &info, err);
+        double dt = rp_clock() - t0;
+        tot->wall_s += dt;
+        tot->cpu_s += rp_cpu_clock() - c0;
+        spent += dt;
+        if (st != RP_OK)
+            break;
+        tot->steps++;
+        tot->sum.rays += info.rays;
+        tot->sum.paths += info.paths;
+        tot->sum.form_factors += info.form_factors;
+        tot->sum.iterations += info.iterations;
+        tot->last = info;
+        if (rp_cancelled(p->cancel)) {
+            tot->stop = RP_STOP_SIGNAL;
+            break;
+        }
+        double clock = p->schedule == RP_SCHEDULE_ITERATIONS ? tot->sum.iterations - iter0 : p->budget_base + spent;
+        if (p->stop_at_rule && info.converged)
+            tot->stop = RP_STOP_RULE;
+        else if (p->budget > 0 && clock >= p->budget)
+            tot->stop = RP_STOP_BUDGET;
+        if (p->progress) {
+            double now = rp_clock();
+            if (now - last_report >= 0.1 || tot->stop != RP_STOP_NONE) {
+                double f = info.progress;
+                if (p->budget > 0 && clock / p->budget > f)
+                    f = clock / p->budget;
+                report(p, tot, f > 1 ? 1 : f, now - start, unit);
+                last_report = now;
+            }
+        }
+        if (p->after_step) {
+            rp_status cs = RP_OK;
+            int end = p->after_step(p->ctx, s, tot, &cs, err);
+            if (cs != RP_OK)
+                st = cs;
+            else if (end && tot->stop == RP_STOP_NONE)
+                tot->stop = RP_STOP_CALLER;
+        }
+    }
+    return st;
+}
