@@ -19,6 +19,7 @@
 #include "solvers/solver.h"
 #include "bench/cli/cli.h"
 #include "bench/cli/commands.h"
+#include "bench/run/driver.h"
 #include "bench/run/metrics.h"
 #include "bench/run/reference.h"
 #include "bench/run/raybench.h"
@@ -56,19 +57,13 @@ static rp_status render(const rp_scene *scene, const char *sampler, unsigned lon
     rp_status st = rp_solver_create(rp_solver_lookup("pathtrace"), scene, &o, &s, err);
     if (st != RP_OK)
         return st;
-    *rays = *paths = 0;
-    double t0 = rp_clock();
-    for (;;) {
-        rp_step_info info;
-        st = rp_solver_step(s, &info, err);
-        if (st != RP_OK)
-            break;
-        *rays += info.rays;
-        *paths += info.paths;
-        *elapsed = rp_clock() - t0;
-        if (info.converged || (seconds > 0 && *elapsed >= seconds))
-            break;
-    }
+    rp_drive_totals tot;
+    memset(&tot, 0, sizeof tot);
+    rp_drive_params dp = {.size = sizeof dp, .budget = seconds, .stop_at_rule = 1};
+    st = rp_drive(s, &dp, &tot, err);
+    *rays = tot.sum.rays;
+    *paths = tot.sum.paths;
+    *elapsed = tot.wall_s;
     if (st == RP_OK) {
         rp_estimate est = {.radiance = image};
         st = rp_solver_estimate(s, &est, err);

@@ -1,5 +1,6 @@
 /* radpt experiment furnace: iterative solvers and the path tracer in the white furnace. */
 #include "bench/experiments/exp_internal.h"
+#include "bench/run/driver.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -33,59 +34,68 @@ typedef struct furnace_row {
 /* Runs one method on a furnace until its surface error (deterministic
  * methods) or its relative standard error (Monte Carlo) is at most tol, or
  * the budget runs out.  The estimate is not timed. */
+/* The furnace's stopping test after each step of the driver: the surface
+ * error (deterministic methods) or the relative standard error (Monte
+ * Carlo, after two steps) at most tol.  The estimate is not timed. */
+typedef struct furnace_check {
+    const rp_scene *scene;
+    double L, tol;
+    int mc;
+    double *x, *se;
+    furnace_row *row;
+} furnace_check;
+
+static int furnace_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp_status *st, rp_error *err)
+{
+    furnace_check *fc = ctx;
+    rp_estimate e = {.surface_radiance = fc->x, .surface_stderr = fc->se};
+    if ((*st = rp_solver_estimate(s, &e, err)) != RP_OK)
+        return 1;
+    size_t n = rp_scene_nsurfaces(fc->scene) * rp_scene_nbands(fc->scene);
+    double worst = 0, worst_se = 0;
+    for (size_t i = 0; i < n; i++) {
+        double d = fabs(fc->x[i] - fc->L) / fc->L, r = fc->se[i] / fc->L;
+        worst = d > worst ? d : worst;
+        worst_se = r > worst_se ? r : worst_se;
+    }
+    fc->row->error = worst;
+    fc->row->rel_stderr = fc->mc ? worst_se : 0;
+    fc->row->reached = fc->mc ? worst_se <= fc->tol && t->steps >= 2 : worst <= fc->tol;
+    return fc->row->reached;
+}
+
+/* Runs one method on a furnace until it meets the tolerance or the budget
+ * runs out. */
 static rp_status furnace_run(const rp_scene *scene, double L, const rp_method_spec *m, double tol, double budget,
                              const rp_experiment_params *p, size_t nelements, furnace_row *row, rp_error *err)
 {
     rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = p->threads, .keys = m->keys,
                     .values = m->values, .count = m->count, .open_ended = 1, .cancel = p->cancel};
     rp_solver *s = NULL;
-    double t0 = rp_clock();
-    rp_status st = rp_solver_create(m->type, scene, &o, &s, err);
-    double wall = rp_clock() - t0, iters = 0, steps = 0;
+    rp_drive_totals tot;
+    memset(&tot, 0, sizeof tot);
+    rp_status st = rp_drive_create(m->type, scene, &o, &s, &tot, err);
     size_t ns = rp_scene_nsurfaces(scene), nb = rp_scene_nbands(scene);
-    double *x = calloc(ns * nb, sizeof *x), *se = calloc(ns * nb, sizeof *se);
-    int mc = rp_method_is_monte_carlo(m);
+    furnace_check fc = {.scene = scene, .L = L, .tol = tol, .mc = rp_method_is_monte_carlo(m),
+                        .x = calloc(ns * nb, sizeof *fc.x), .se = calloc(ns * nb, sizeof *fc.se), .row = row};
     row->reached = 0;
     row->error = row->rel_stderr = NAN;
-    if (st == RP_OK && (!x || !se))
+    if (st == RP_OK && (!fc.x || !fc.se))
         st = rp_error_set(err, RP_ERR_NOMEM, "out of memory");
-    while (st == RP_OK) {
-        rp_step_info info;
-        memset(&info, 0, sizeof info);
-        t0 = rp_clock();
-        st = rp_solver_step(s, &info, err);
-        wall += rp_clock() - t0;
-        if (st != RP_OK)
-            break;
-        iters += info.iterations;
-        steps++;
-        rp_estimate e = {.surface_radiance = x, .surface_stderr = se};
-        if ((st = rp_solver_estimate(s, &e, err)) != RP_OK)
-            break;
-        double worst = 0, worst_se = 0;
-        for (size_t i = 0; i < ns * nb; i++) {
-            double d = fabs(x[i] - L) / L, r = se[i] / L;
-            worst = d > worst ? d : worst;
-            worst_se = r > worst_se ? r : worst_se;
-        }
-        row->error = worst;
-        row->rel_stderr = mc ? worst_se : 0;
-        if ((mc ? worst_se <= tol && steps >= 2 : worst <= tol)) {
-            row->reached = 1;
-            break;
-        }
-        if (wall >= budget)
-            break;
-        if (rp_cancelled(p->cancel))
-            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
-    }
-    row->seconds = wall;
-    row->iterations = iters;
-    row->steps = steps;
+    rp_drive_params dp = {.size = sizeof dp, .budget = budget, .budget_base = tot.wall_s, .cancel = p->cancel,
+                          .after_step = furnace_after_step, .ctx = &fc};
+    if (st == RP_OK)
+        st = rp_drive(s, &dp, &tot, err);
+    if (st == RP_OK && tot.stop == RP_STOP_SIGNAL)
+        st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+    row->seconds = tot.wall_s;
+    row->iterations = tot.sum.iterations;
+    row->steps = tot.steps;
     /* comparable sweeps: a progressive shot updates one element */
-    row->sweeps = strcmp(m->name, "southwell") == 0 ? iters / (double)nelements : (mc ? NAN : iters);
-    free(x);
-    free(se);
+    row->sweeps = strcmp(m->name, "southwell") == 0 ? tot.sum.iterations / (double)nelements
+                                                    : (fc.mc ? NAN : tot.sum.iterations);
+    free(fc.x);
+    free(fc.se);
     rp_solver_destroy(s);
     return st;
 }

@@ -1,5 +1,6 @@
 /* radpt experiment hierarchy: hierarchical radiosity, links against leaves. */
 #include "bench/experiments/exp_internal.h"
+#include "bench/run/driver.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -45,20 +46,22 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
         rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .seed = 1, .threads = p->threads,
                         .keys = keys, .values = values, .count = 2, .cancel = p->cancel};
         rp_solver *s = NULL;
-        double t0 = rp_clock();
-        st = rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, err);
-        for (int i = 0; st == RP_OK && i < 1000; i++) {
-            rp_step_info info;
-            st = rp_solver_step(s, &info, err);
-            if (st == RP_OK && info.converged)
-                break;
-        }
+        rp_drive_totals tot;
+        memset(&tot, 0, sizeof tot);
+        st = rp_drive_create(&rp_solver_hierarchical, scene, &o, &s, &tot, err);
+        /* to the method's rule, at most 1000 steps */
+        rp_drive_params dp = {.size = sizeof dp, .budget = 1000, .schedule = RP_SCHEDULE_STEPS, .stop_at_rule = 1,
+                              .cancel = p->cancel};
+        if (st == RP_OK)
+            st = rp_drive(s, &dp, &tot, err);
+        if (st == RP_OK && tot.stop == RP_STOP_SIGNAL)
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
         if (st == RP_OK) {
             rp_hier_stats hs;
             rp_hierarchical_stats(rp_solver_state(s), &hs);
             leaves[k] = (double)hs.leaves;
             links[k] = (double)hs.links;
-            seconds[k] = rp_clock() - t0;
+            seconds[k] = tot.wall_s;
             if (p->log) {
                 char line[160];
                 snprintf(line, sizeof line, "  hierarchical bf-epsilon %g: %zu leaves, %zu links, %.2f s", bf[k],
@@ -148,18 +151,18 @@ static rp_status hierarchy_solve(const rp_scene *scene, const rp_reference *ref,
     if (!x)
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     rp_solver *s = NULL;
-    double t0 = rp_clock();
-    rp_status st = rp_solver_create(t, scene, &o, &s, err);
-    row->form_factors = 0;
-    for (int i = 0; st == RP_OK && i < 100000; i++) {
-        rp_step_info info;
-        memset(&info, 0, sizeof info);
-        st = rp_solver_step(s, &info, err);
-        row->form_factors += info.form_factors;
-        if (st == RP_OK && info.converged)
-            break;
-    }
-    row->seconds = rp_clock() - t0;
+    rp_drive_totals tot;
+    memset(&tot, 0, sizeof tot);
+    rp_status st = rp_drive_create(t, scene, &o, &s, &tot, err);
+    /* to the method's rule, at most 100000 steps */
+    rp_drive_params dp = {.size = sizeof dp, .budget = 100000, .schedule = RP_SCHEDULE_STEPS, .stop_at_rule = 1,
+                          .cancel = cancel};
+    if (st == RP_OK)
+        st = rp_drive(s, &dp, &tot, err);
+    if (st == RP_OK && tot.stop == RP_STOP_SIGNAL)
+        st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+    row->form_factors = tot.sum.form_factors;
+    row->seconds = tot.wall_s;
     if (st == RP_OK) {
         rp_estimate e = {.surface_radiance = x};
         st = rp_solver_estimate(s, &e, err);

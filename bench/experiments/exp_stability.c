@@ -28,6 +28,7 @@
 #include "bench/report/files.h"
 #include "bench/run/clock.h"
 #include "bench/experiments/exp_internal.h"
+#include "bench/run/driver.h"
 #include "bench/run/harness.h"
 #include "bench/report/image.h"
 #include "bench/run/metrics.h"
@@ -154,6 +155,28 @@ static double worst_rel(const srun *r, double exact)
     return worst;
 }
 
+/* After each step of a stability run: with a closed form, stop once the
+ * worst surface is within tol of it; stop at max_steps. */
+typedef struct stab_check {
+    srun *r;
+    const sopt *so;
+} stab_check;
+
+static int stab_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp_status *st, rp_error *err)
+{
+    stab_check *sk = ctx;
+    if (sk->so->exact > 0) {
+        rp_estimate e = {.surface_radiance = sk->r->surf, .surface_stderr = sk->r->se};
+        if ((*st = rp_solver_estimate(s, &e, err)) != RP_OK)
+            return 1;
+        if (worst_rel(sk->r, sk->so->exact) <= sk->so->tol) {
+            sk->r->reached = 1;
+            return 1;
+        }
+    }
+    return sk->so->max_steps && t->steps >= sk->so->max_steps;
+}
+
 static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const sopt *so, srun *r, rp_error *err)
 {
     memset(r, 0, sizeof *r);
@@ -186,40 +209,24 @@ static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const so
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     }
     rp_solver *s = NULL;
-    double t0 = rp_clock();
-    st = rp_solver_create(m.type, sc, &o, &s, err);
-    r->seconds = rp_clock() - t0;
-    while (st == RP_OK) {
-        rp_step_info info;
-        memset(&info, 0, sizeof info);
-        t0 = rp_clock();
-        st = rp_solver_step(s, &info, err);
-        r->seconds += rp_clock() - t0;
-        if (st != RP_OK)
-            break;
-        r->steps++;
-        r->rays += info.rays;
-        r->paths += info.paths;
-        r->iterations += info.iterations;
-        r->ff += info.form_factors;
-        if (so->exact > 0) {
-            rp_estimate e = {.surface_radiance = r->surf, .surface_stderr = r->se};
-            if ((st = rp_solver_estimate(s, &e, err)) != RP_OK)
-                break;
-            if (worst_rel(r, so->exact) <= so->tol) {
-                r->reached = 1;
-                break;
-            }
-        }
-        if (info.converged) {
-            r->converged = 1;
-            break;
-        }
-        if (r->seconds >= so->budget || (so->max_steps && r->steps >= so->max_steps))
-            break;
-        if (rp_cancelled(S->p->cancel))
-            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
-    }
+    rp_drive_totals tot;
+    memset(&tot, 0, sizeof tot);
+    st = rp_drive_create(m.type, sc, &o, &s, &tot, err);
+    stab_check sk = {.r = r, .so = so};
+    rp_drive_params dp = {.size = sizeof dp, .budget = so->budget, .budget_base = tot.wall_s, .stop_at_rule = 1,
+                          .cancel = S->p->cancel, .after_step = stab_after_step, .ctx = &sk};
+    if (st == RP_OK)
+        st = rp_drive(s, &dp, &tot, err);
+    if (st == RP_OK && tot.stop == RP_STOP_SIGNAL)
+        st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+    r->seconds = tot.wall_s;
+    r->steps = tot.steps;
+    r->rays = tot.sum.rays;
+    r->paths = tot.sum.paths;
+    r->iterations = tot.sum.iterations;
+    r->ff = tot.sum.form_factors;
+    /* met its rule, not stopped first by the closed form's tolerance */
+    r->converged = tot.stop == RP_STOP_RULE && !r->reached;
     if (st == RP_OK) {
         rp_estimate e = {.radiance = r->img, .variance = r->var, .surface_radiance = r->surf,
                          .surface_stderr = r->se};

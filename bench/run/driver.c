@@ -34,7 +34,7 @@ rp_status rp_drive(rp_solver *s, const rp_drive_params *p, rp_drive_totals *tot,
 {
     const char *unit = rp_solver_type_of(s)->iteration_name ? rp_solver_type_of(s)->iteration_name : "iterations";
     double spent = 0, last_report = -1, start = rp_clock();
-    const double iter0 = tot->sum.iterations;
+    const double iter0 = tot->sum.iterations, steps0 = tot->steps;
     tot->stop = RP_STOP_NONE;
     rp_status st = RP_OK;
     while (st == RP_OK && tot->stop == RP_STOP_NONE) {
@@ -58,7 +58,9 @@ rp_status rp_drive(rp_solver *s, const rp_drive_params *p, rp_drive_totals *tot,
             tot->stop = RP_STOP_SIGNAL;
             break;
         }
-        double clock = p->schedule == RP_SCHEDULE_ITERATIONS ? tot->sum.iterations - iter0 : p->budget_base + spent;
+        double clock = p->schedule == RP_SCHEDULE_ITERATIONS ? tot->sum.iterations - iter0
+                       : p->schedule == RP_SCHEDULE_STEPS    ? tot->steps - steps0
+                                                             : p->budget_base + spent;
         if (p->stop_at_rule && info.converged)
             tot->stop = RP_STOP_RULE;
         else if (p->budget > 0 && clock >= p->budget)

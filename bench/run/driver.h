@@ -33,7 +33,8 @@
 
 typedef enum rp_schedule {
     RP_SCHEDULE_TIME,       /* budget in seconds of solver time */
-    RP_SCHEDULE_ITERATIONS  /* budget in the method's iterations (steps' sum) */
+    RP_SCHEDULE_ITERATIONS, /* budget in the method's iterations (steps' sum) */
+    RP_SCHEDULE_STEPS       /* budget in calls of step (a cap) */
 } rp_schedule;
 
 /* Why a run ended (RP_STOP_NONE: it has not). */

@@ -16,6 +16,7 @@
 #include "bench/report/image.h"
 #include "bench/run/metrics.h"
 #include "bench/report/plot.h"
+#include "bench/run/driver.h"
 #include "bench/run/resume.h"
 
 /* Sub-pixel rays per side for the pixel mask. */
@@ -342,6 +343,48 @@ static rp_status make_exact(const rp_scene *scene, const double *L, rp_reference
 #define PARAM(p, field, fallback)                                                                   \
     ((p) && (p)->size >= offsetof(rp_reference_params, field) + sizeof(p)->field ? (p)->field : (fallback))
 
+/* A reference render's state saving and stop flag, after each step of
+ * the driver: the state goes to the checkpoint file every `every` seconds
+ * (the totals: the resumed run's plus this run's). */
+typedef struct ref_saving {
+    const char *ckpt;
+    double every, prior, last_ckpt;
+    volatile sig_atomic_t *stop;
+    rp_resume_info *id;
+    rp_resume_info base; /* the totals the run resumed with */
+    int based, interrupted;
+} ref_saving;
+
+static void ref_totals(ref_saving *sv, const rp_drive_totals *t)
+{
+    if (!sv->based) {
+        sv->base = *sv->id;
+        sv->based = 1;
+    }
+    sv->id->steps = sv->base.steps + t->steps;
+    sv->id->iterations = sv->base.iterations + t->sum.iterations;
+    sv->id->rays = sv->base.rays + t->sum.rays;
+    sv->id->paths = sv->base.paths + t->sum.paths;
+    sv->id->seconds = sv->prior + t->wall_s;
+}
+
+static int ref_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp_status *st, rp_error *err)
+{
+    ref_saving *sv = ctx;
+    if (t->stop != RP_STOP_NONE)
+        return 0;
+    if (sv->stop && *sv->stop) {
+        sv->interrupted = 1;
+        return 1;
+    }
+    if (sv->ckpt && rp_clock() - sv->last_ckpt >= sv->every) {
+        ref_totals(sv, t);
+        *st = rp_resume_save(sv->ckpt, sv->id, s, err);
+        sv->last_ckpt = rp_clock();
+    }
+    return 0;
+}
+
 static rp_status make_pathtraced(const rp_scene *scene, const char *scene_name, const rp_reference_params *p,
                                  rp_reference *r, rp_error *err)
 {
@@ -398,42 +441,22 @@ static rp_status make_pathtraced(const rp_scene *scene, const char *scene_name, 
         id.paths = got.paths;
         done = last_info.converged;
     }
-    double t0 = rp_clock(), last = -1, last_ckpt = t0, excluded = 0;
-    while (!done) {
-        rp_step_info info;
-        if ((st = rp_solver_step(solver, &info, err)) != RP_OK)
-            break;
-        id.steps += 1;
-        id.iterations += info.iterations;
-        id.rays += info.rays;
-        id.paths += info.paths;
-        double now = rp_clock();
-        if (p && p->progress && (now - last > 0.2 || info.converged)) {
-            char detail[96];
-            snprintf(detail, sizeof detail, "reference, %.0f%% of %lu spp, %.0f s", 100 * info.progress, spp,
-                     now - t0);
-            p->progress(p->progress_ctx, info.progress, detail);
-            last = now;
-        }
-        if (info.converged)
-            break;
-        if (stop && *stop) {
-            interrupted = 1;
-            break;
-        }
-        if (rp_cancelled(o.cancel)) {
-            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted while rendering the reference");
-            break;
-        }
-        if (ckpt && now - last_ckpt >= every) {
-            id.seconds = prior + (now - t0 - excluded);
-            if ((st = rp_resume_save(ckpt, &id, solver, err)) != RP_OK)
-                break;
-            last_ckpt = rp_clock();
-            excluded += last_ckpt - now;
-        }
-    }
-    r->seconds = prior + (rp_clock() - t0 - excluded);
+    ref_saving sv = {.ckpt = ckpt, .every = every, .stop = stop, .id = &id, .prior = prior,
+                     .last_ckpt = rp_clock()};
+    char label[96];
+    snprintf(label, sizeof label, "reference, %lu spp", spp);
+    rp_drive_totals tot;
+    memset(&tot, 0, sizeof tot);
+    rp_drive_params dp = {.size = sizeof dp, .stop_at_rule = 1, .cancel = o.cancel, .after_step = ref_after_step,
+                          .ctx = &sv, .progress = p ? p->progress : NULL, .progress_ctx = p ? p->progress_ctx : NULL,
+                          .label = label};
+    if (!done)
+        st = rp_drive(solver, &dp, &tot, err);
+    if (st == RP_OK && tot.stop == RP_STOP_SIGNAL)
+        st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted while rendering the reference");
+    interrupted = sv.interrupted;
+    ref_totals(&sv, &tot);
+    r->seconds = prior + tot.wall_s;
     if (st == RP_OK && ckpt) {
         id.seconds = r->seconds;
         st = rp_resume_save(ckpt, &id, solver, err);
