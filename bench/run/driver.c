@@ -61,7 +61,10 @@ rp_status rp_drive(rp_solver *s, const rp_drive_params *p, rp_drive_totals *tot,
         double clock = p->schedule == RP_SCHEDULE_ITERATIONS ? tot->sum.iterations - iter0
                        : p->schedule == RP_SCHEDULE_STEPS    ? tot->steps - steps0
                                                              : p->budget_base + spent;
-        if (p->stop_at_rule && info.converged)
+        /* a converged method that did no work in its step has nothing
+         * left to do, whatever stop_at_rule says */
+        if (info.converged && (p->stop_at_rule || (info.iterations == 0 && info.rays == 0 &&
+                                                   info.form_factors == 0 && info.paths == 0)))
             tot->stop = RP_STOP_RULE;
         else if (p->budget > 0 && clock >= p->budget)
             tot->stop = RP_STOP_BUDGET;

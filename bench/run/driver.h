@@ -15,7 +15,8 @@
  *   2. cancellation: when *cancel is set the run stops at once (stop =
  *      RP_STOP_SIGNAL), after_step is not called for that step;
  *   3. tot->stop is set when the run will end after this step: the method's
- *      rule is met (converged, where stop_at_rule is set) or the budget is
+ *      rule is met (converged, where stop_at_rule is set, or converged with
+ *      a step that did no work: nothing is left to do) or the budget is
  *      spent (budget_base + this call's solver time, or the iterations, >=
  *      budget);
  *   4. progress (a fraction and a detail with an ETA, rate-limited);

@@ -406,7 +406,19 @@ static rp_status sw_step(void *state, rp_step_info *info, rp_error *err)
     for (size_t j = 1; j < n; j++)
         if (s->power[j] > s->power[i])
             i = (uint32_t)j;
-    if (s->power[i] > 0) {
+    if (!(s->power[i] > 0)) {
+        /* Nothing left to shoot: the solution is exact.  A step then does
+         * no work and counts no shot; the method says it has converged
+         * whatever its rules, since more steps cannot change anything. */
+        info->residual = 0;
+        info->tolerance = sys->tolerance;
+        info->unshot = 0;
+        info->progress = 1;
+        info->converged = 1;
+        info->memory = (double)sys->bytes;
+        return RP_OK;
+    }
+    {
         const float *ccol = NULL;
         if ((st = sw_column(s, i, info, &ccol, err)) != RP_OK)
             return st;
