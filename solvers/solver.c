@@ -310,3 +310,8 @@ rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_e
         rp_raycast_set_offset(rc, rel);
     return st;
 }
+
+const char *rp_solver_samples_name(const rp_solver_type *type)
+{
+    return type->samples_name ? type->samples_name : type->iteration_name ? type->iteration_name : "iterations";
+}

@@ -118,7 +118,20 @@ typedef struct rp_solver_type {
      * rp_solver_save / rp_solver_load, which frame and checksum the fields. */
     rp_status (*save)(const void *state, FILE *f, rp_error *err);
     rp_status (*load)(void *state, FILE *f, rp_step_info *info, rp_error *err);
+    /* What the harness needs to know of a method, declared here rather than
+     * guessed from its name.  monte_carlo: its answers are random (benches
+     * run it with several seeds; it reports standard errors).  samples_name:
+     * what rp_estimate.samples counts, for tables and chart axes ("samples
+     * per pixel", "sweeps"); NULL: iteration_name.  surfaces_cost: answering
+     * for surface averages costs it extra work (the path tracer's probe
+     * paths), so the harness asks for them only when needed. */
+    int monte_carlo;
+    const char *samples_name;
+    int surfaces_cost;
 } rp_solver_type;
+
+/* What one sample of the type counts, plural ("samples per pixel"). */
+const char *rp_solver_samples_name(const rp_solver_type *type);
 
 /* A solver instance: its type and its state. */
 typedef struct rp_solver rp_solver;

@@ -207,8 +207,10 @@ static rp_status write_summary_json(const rp_bench *b, const char *dir, const ch
         rp_json_string(f, m->text);
         fprintf(f, ", \"method\": ");
         rp_json_string(f, m->name);
-        fprintf(f, ", \"monte_carlo\": %s, \"runs\": %zu, \"runs_ok\": %zu, \"errors\": [",
-                rp_method_is_monte_carlo(m) ? "true" : "false", s->runs, s->runs_ok);
+        fprintf(f, ", \"monte_carlo\": %s, \"samples_unit\": \"%s\", \"runs\": %zu, \"runs_ok\": %zu, "
+                   "\"errors\": [",
+                rp_method_is_monte_carlo(m) ? "true" : "false", rp_solver_samples_name(m->type), s->runs,
+                s->runs_ok);
         int first = 1;
         for (size_t ri = 0; ri < b->nruns; ri++)
             if (b->runs[ri].method == mi && b->runs[ri].status != RP_OK) {

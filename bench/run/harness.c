@@ -117,7 +117,7 @@ const char *rp_method_spec_get(const rp_method_spec *m, const char *key)
 
 int rp_method_is_monte_carlo(const rp_method_spec *m)
 {
-    return strcmp(m->name, "pathtrace") == 0 || strncmp(m->name, "stochastic", 10) == 0;
+    return m->type && m->type->monte_carlo;
 }
 
 /* A spec copied by value keeps pointers into the original's buffer;
@@ -252,8 +252,8 @@ rp_status rp_harness_run(const rp_scene *scene, const rp_reference *ref, const r
     run_ctx c = {.scene = scene, .ref = ref, .nb = rp_scene_nbands(scene), .ns = rp_scene_nsurfaces(scene)};
     const rp_camera *cam = rp_scene_camera(scene);
     c.npix = cam && ref->radiance ? (size_t)cam->width * cam->height : 0;
-    int mc_pathtrace = strcmp(m->name, "pathtrace") == 0;
-    c.want = (c.npix ? RP_WANT_IMAGE : 0) | (!mc_pathtrace || hp->surfaces_for_mc || !c.npix ? RP_WANT_SURFACES : 0);
+    const int costly = m->type->surfaces_cost;
+    c.want = (c.npix ? RP_WANT_IMAGE : 0) | (!costly || hp->surfaces_for_mc || !c.npix ? RP_WANT_SURFACES : 0);
     run->cp = calloc(levels + 1, sizeof *run->cp);
     c.image = c.npix ? malloc(c.npix * c.nb * sizeof *c.image) : NULL;
     c.surf = calloc(c.ns * c.nb + 1, sizeof *c.surf);

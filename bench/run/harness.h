@@ -53,7 +53,8 @@ rp_status rp_method_spec_parse(const char *text, rp_method_spec *out, rp_error *
 rp_status rp_method_list_parse(const char *list, rp_method_spec **out, size_t *n, rp_error *err);
 /* The value a spec gives an option, or NULL. */
 const char *rp_method_spec_get(const rp_method_spec *m, const char *key);
-/* Monte Carlo methods (pathtrace, stochastic-*) run with several seeds. */
+/* Monte Carlo methods (the type's monte_carlo: pathtrace,
+ * stochastic-jacobi) run with several seeds. */
 int rp_method_is_monte_carlo(const rp_method_spec *m);
 
 /* One row of runs.csv. */

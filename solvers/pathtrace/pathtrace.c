@@ -830,4 +830,8 @@ const rp_solver_type rp_solver_pathtrace = {
     .fini = pt_fini,
     .save = pt_save,
     .load = pt_load,
+    .iteration_name = "passes",
+    .monte_carlo = 1,
+    .samples_name = "samples per pixel",
+    .surfaces_cost = 1,
 };

@@ -606,4 +606,5 @@ const rp_solver_type rp_solver_stochastic_jacobi = {
     .step = sj_step,
     .estimate = sj_estimate,
     .fini = sj_fini,
+    .monte_carlo = 1,
 };
