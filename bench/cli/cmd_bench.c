@@ -198,6 +198,67 @@ static void resume_hint(int argc, char **argv, const char *dir, char *buf, size_
     }
 }
 
+/* The end of `radpt bench` on stdout, as hyperfine ends: per method its
+ * final RMSE (mean +- sd over seeds), surface error, solver time, and its
+ * time to the target RMSE against the slowest's; from the summaries
+ * report.md prints (nothing computed twice). */
+static void print_summary_table(const rp_bench *b)
+{
+    double slowest = 0;
+    for (size_t mi = 0; mi < b->nmethods; mi++) {
+        double t = b->summary[mi].time_to_target;
+        if (isfinite(t) && t > slowest)
+            slowest = t;
+    }
+    size_t w = 6;
+    for (size_t mi = 0; mi < b->nmethods; mi++)
+        w = strlen(b->methods[mi].text) > w ? strlen(b->methods[mi].text) : w;
+    if (w > 48)
+        w = 48;
+    printf("\n%-*s  %-22s  %-13s  %-9s  %s\n", (int)w, "method", "final RMSE (mean +- sd)", "surface error",
+           "time (s)", isfinite(b->target) ? "time to target" : "");
+    for (size_t mi = 0; mi < b->nmethods; mi++) {
+        const rp_method_summary *s = &b->summary[mi];
+        const rp_agg *a = &s->final;
+        char rmse[64] = "n/a", surf[32] = "n/a", ttt[64] = "not reached";
+        if (s->runs_ok && isfinite(a->rmse))
+            snprintf(rmse, sizeof rmse, "%.4g +- %.2g", a->rmse, isfinite(a->rmse_sd) ? a->rmse_sd : 0.0);
+        if (s->runs_ok && isfinite(a->surface_err))
+            snprintf(surf, sizeof surf, "%.3g%%", 100 * a->surface_err);
+        if (isfinite(s->time_to_target))
+            snprintf(ttt, sizeof ttt, s->time_to_target >= slowest ? "%.3g s (the slowest)" : "%.3g s (%.2fx faster "
+                     "than the slowest)", s->time_to_target, s->time_to_target > 0 ? slowest / s->time_to_target : 1.0);
+        if (!isfinite(b->target))
+            ttt[0] = '\0';
+        printf("%-*.*s  %-22s  %-13s  %-9.3g  %s\n", (int)w, (int)w, b->methods[mi].text, rmse, surf,
+               s->runs_ok ? a->wall_s : 0.0, ttt);
+    }
+    if (isfinite(b->target))
+        printf("target RMSE %.4g (%s)\n", b->target, b->target_auto ? "automatic: the geometric mean of the best "
+                                                                       "and worst final RMSE" : "--target");
+}
+
+/* Copies DIR/NAME to path (atomically), for --export-json / --export-csv. */
+static rp_status export_copy(const char *dir, const char *name, const char *path, rp_error *err)
+{
+    char src[1200];
+    rp_path_join(src, sizeof src, dir, name);
+    FILE *in = fopen(src, "rb");
+    if (!in)
+        return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot read", src);
+    rp_out o;
+    rp_status st = rp_out_open(&o, path, err);
+    char buf[65536];
+    size_t n;
+    int ok = 1;
+    while (st == RP_OK && (n = fread(buf, 1, sizeof buf, in)) > 0)
+        ok &= fwrite(buf, 1, n, o.f) == n;
+    fclose(in);
+    if (st == RP_OK)
+        st = rp_out_close(&o, ok, err);
+    return st;
+}
+
 typedef struct bench_sink {
     const char *dir;
 } bench_sink;
@@ -332,7 +393,8 @@ int rp_cmd_reference(int argc, char **argv)
 int rp_cmd_bench(int argc, char **argv)
 {
     static const char *const extra[] = {"methods", "budget", "seeds", "checkpoints", "target", "cache",
-                                        "reference-spp", "reference-samples", "exposure", "resume", NULL};
+                                        "reference-spp", "reference-samples", "exposure", "resume",
+                                        "export-json", "export-csv", NULL};
     static const char *const flags[] = {"--surfaces", NULL};
     int found[1] = {0};
     char **av = calloc((size_t)argc + 1, sizeof *av);
@@ -364,6 +426,10 @@ int rp_cmd_bench(int argc, char **argv)
     int resume = 0;
     if (!rc)
         rc = study_dir(&cli, &dir, &resume);
+    if (!rc)
+        rc = rp_cli_check_output("bench", "--export-json", rp_cli_extra(&cli, "export-json"));
+    if (!rc)
+        rc = rp_cli_check_output("bench", "--export-csv", rp_cli_extra(&cli, "export-csv"));
     if (!rc && cli.seed == 0) {
         fprintf(stderr, "radpt bench: --seed must be at least 1 (see radpt help)\n");
         rc = 2;
@@ -433,9 +499,15 @@ int rp_cmd_bench(int argc, char **argv)
         rp_bench_output out = {.size = sizeof out, .sheet = 1, .command = cmd,
                                .exposure = rp_cli_extra(&cli, "exposure") ? &exposure : NULL};
         st = rp_bench_write(bench, dir, &out, note, &err);
+        const char *ej = rp_cli_extra(&cli, "export-json"), *ec = rp_cli_extra(&cli, "export-csv");
+        if (st == RP_OK && ej)
+            st = export_copy(dir, "summary.json", ej, &err);
+        if (st == RP_OK && ec)
+            st = export_copy(dir, "runs.csv", ec, &err);
         if (st == RP_OK) {
             if (note[0])
                 fprintf(stderr, "radpt bench: %s\n", note);
+            print_summary_table(bench);
             printf("report: %s/report.md (runs.csv, summary.json and charts in %s)\n", dir, dir);
             if (bench->interrupted) {
                 char hint[2400];

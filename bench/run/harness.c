@@ -15,6 +15,29 @@
 
 /* ------------------------------------------------------------- specs */
 
+/* The form of an option's value, checked before any run so that a bench
+ * fails at once rather than after its other methods: one of the words of
+ * an "a|b|c" argument, else a number (a whole one >= 0 for "N"); ranges are
+ * the method's own check at init. */
+static int value_fits(const rp_option_spec *spec, const char *v)
+{
+    if (strchr(spec->arg, '|')) {
+        size_t n = strlen(v);
+        for (const char *w = spec->arg; *w;) {
+            size_t len = strcspn(w, "|");
+            if (len == n && strncmp(w, v, n) == 0)
+                return 1;
+            w += len + (w[len] == '|');
+        }
+        return 0;
+    }
+    char *end;
+    double x = strtod(v, &end);
+    if (end == v || *end || !isfinite(x))
+        return 0;
+    return strcmp(spec->arg, "N") != 0 || (x >= 0 && x == floor(x));
+}
+
 rp_status rp_method_spec_parse(const char *text, rp_method_spec *m, rp_error *err)
 {
     memset(m, 0, sizeof *m);
@@ -65,6 +88,9 @@ rp_status rp_method_spec_parse(const char *text, rp_method_spec *m, rp_error *er
         if (eq && !spec->arg)
             return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': option '%s' is a flag and takes no value", text,
                                 p);
+        if (eq && !value_fits(spec, eq + 1))
+            return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': %s=%s: expected %s%s", text, p, eq + 1,
+                                strchr(spec->arg, '|') ? "one of " : "a number for ", spec->arg);
         m->keys[m->count] = spec->name;
         m->values[m->count++] = eq ? eq + 1 : "1";
     }
