@@ -208,7 +208,9 @@ static rp_status measure(run_ctx *c, rp_checkpoint *cp, rp_error *err)
         cp->relmse = im.relmse;
         cp->mae = im.mae;
         double d = im.rmse * im.rmse - r->rmse_se * r->rmse_se;
-        cp->rmse_debiased = isfinite(r->rmse_se) ? sqrt(d > 0 ? d : 0) : NAN;
+        /* below the reference's own error the difference is not resolved:
+         * no value (an empty field, "n/a"), not a misleading 0 */
+        cp->rmse_debiased = isfinite(r->rmse_se) && d > 0 ? sqrt(d) : NAN;
     }
     if (e.surface_radiance)
         cp->surface_err = rp_metrics_surface_error(c->surf, r->surface_radiance, r->surface_mask, c->ns, c->nb, NULL);

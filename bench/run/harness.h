@@ -67,7 +67,8 @@ typedef struct rp_checkpoint {
     double residual, unshot;
     double peak_rss_mb, solver_mb;
     double rmse, relmse, mae, surface_err;
-    /* sqrt(max(0, rmse^2 - reference RMSE standard error^2)).  The
+    /* sqrt(rmse^2 - reference RMSE standard error^2), NaN (not resolved)
+     * where that is not positive.  The
      * reference r is independent of the run, so E[(x - r)^2] =
      * E[(x - L)^2] + E[(r - L)^2] against the truth L: rmse overestimates
      * the error against L by the reference's own error, and subtracting the
