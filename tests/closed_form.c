@@ -36,3 +36,19 @@ double rp_cf_point_rect_mean(double x0, double x1, double y0, double y1, double 
     gsl_integration_glfixed_table_free(t);
     return sum / ((x1 - x0) * (y1 - y0));
 }
+
+double rp_cf_howell_parallel(double a, double b, double c)
+{
+    double X = a / c, Y = b / c, X2 = X * X, Y2 = Y * Y;
+    return 2.0 / (M_PI * X * Y) *
+           (0.5 * log((1 + X2) * (1 + Y2) / (1 + X2 + Y2)) + X * sqrt(1 + Y2) * atan(X / sqrt(1 + Y2)) +
+            Y * sqrt(1 + X2) * atan(Y / sqrt(1 + X2)) - X * atan(X) - Y * atan(Y));
+}
+
+double rp_cf_howell_perpendicular(double w, double h, double l)
+{
+    double W = w / l, H = h / l, W2 = W * W, H2 = H * H, S = W2 + H2;
+    double t = (1 + W2) * (1 + H2) / (1 + S) * pow(W2 * (1 + S) / ((1 + W2) * S), W2) *
+               pow(H2 * (1 + S) / ((1 + H2) * S), H2);
+    return 1.0 / (M_PI * W) * (W * atan(1 / W) + H * atan(1 / H) - sqrt(S) * atan(1 / sqrt(S)) + 0.25 * log(t));
+}

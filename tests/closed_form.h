@@ -18,4 +18,12 @@ double rp_cf_point_rect(double x, double y, double a, double b, double c);
  * plane (a pixel's footprint), by 8 x 8-point Gauss-Legendre (GSL). */
 double rp_cf_point_rect_mean(double x0, double x1, double y0, double y1, double a, double b, double c);
 
+/* Howell's catalog C-11: directly opposed parallel a x b rectangles at
+ * distance c (docs/ground-truth.md; 0.1998248957 for a = b = c = 1). */
+double rp_cf_howell_parallel(double a, double b, double c);
+
+/* Howell's C-14: perpendicular rectangles sharing an edge of length l, from
+ * the one of width w to the one of height h (0.2000437761 for 1, 1, 1). */
+double rp_cf_howell_perpendicular(double w, double h, double l);
+
 #endif

@@ -33,29 +33,9 @@
 #include "geometry/raycast.h"
 #include "geometry/scene.h"
 #include "solvers/radiosity/formfactor.h"
+#include "closed_form.h"
 
 /* ---- closed forms (docs/ground-truth.md) -------------------------------- */
-
-/* C-11: directly opposed parallel rectangles a x b at distance c. */
-static double howell_c11(double a, double b, double c)
-{
-    double X = a / c, Y = b / c;
-    double sx = sqrt(1 + X * X), sy = sqrt(1 + Y * Y);
-    return 2 / (M_PI * X * Y) *
-           (0.5 * log((1 + X * X) * (1 + Y * Y) / (1 + X * X + Y * Y)) + X * sy * atan(X / sy) +
-            Y * sx * atan(Y / sx) - X * atan(X) - Y * atan(Y));
-}
-
-/* C-14: from A1 of width w to A2 of height h, sharing an edge of length l
- * at right angles. */
-static double howell_c14(double w, double h, double l)
-{
-    double W = w / l, H = h / l, W2 = W * W, H2 = H * H, S = W2 + H2;
-    double lg = log((1 + W2) * (1 + H2) / (1 + S)) +
-                W2 * log(W2 * (1 + S) / ((1 + W2) * S)) + H2 * log(H2 * (1 + S) / ((1 + H2) * S));
-    return 1 / (M_PI * W) *
-           (W * atan(1 / W) + H * atan(1 / H) - sqrt(S) * atan(1 / sqrt(S)) + 0.25 * lg);
-}
 
 /* A differential area parallel to an x by y rectangle at distance c,
  * its normal through a corner; signed in x and y so that rectangles not
@@ -187,7 +167,7 @@ static void check_pair_rectangles(double tolerance, double bound)
         fixture f;
         parallel_scene(buf, sizeof buf, a, b, c);
         setup(&f, buf, 100, 0, (rp_ff_params){.method = RP_FF_ANALYTIC, .tolerance = tolerance});
-        double ref = howell_c11(a, b, c);
+        double ref = rp_cf_howell_parallel(a, b, c);
         double fab = surf_ff(&f, "A", "B", NULL, NULL), fba = surf_ff(&f, "B", "A", NULL, NULL);
         cr_expect(fabs(fab / ref - 1) < bound, "C-11 %g %g %g: F_AB %.12g vs %.12g (%.2e)", a, b, c,
                   fab, ref, fab / ref - 1);
@@ -200,7 +180,7 @@ static void check_pair_rectangles(double tolerance, double bound)
         perpendicular_scene(buf, sizeof buf, w, h, l);
         setup(&f, buf, 100, 0, (rp_ff_params){.method = RP_FF_ANALYTIC, .tolerance = tolerance});
         double fab = surf_ff(&f, "A", "B", NULL, NULL), fba = surf_ff(&f, "B", "A", NULL, NULL);
-        double rab = howell_c14(w, h, l), rba = howell_c14(h, w, l);
+        double rab = rp_cf_howell_perpendicular(w, h, l), rba = rp_cf_howell_perpendicular(h, w, l);
         cr_expect(fabs(fab / rab - 1) < bound, "C-14 %g %g %g: F_AB %.12g vs %.12g (%.2e)", w, h, l,
                   fab, rab, fab / rab - 1);
         cr_expect(fabs(fba / rba - 1) < bound, "C-14 %g %g %g: F_BA %.12g vs %.12g (%.2e)", w, h, l,
@@ -212,8 +192,8 @@ static void check_pair_rectangles(double tolerance, double bound)
 Test(formfactor, closed_forms_are_right)
 {
     /* The values docs/ground-truth.md quotes for its own check. */
-    cr_assert(fabs(howell_c11(1, 1, 1) - 0.1998248957) < 1e-10);
-    cr_assert(fabs(howell_c14(1, 1, 1) - 0.2000437761) < 1e-10);
+    cr_assert(fabs(rp_cf_howell_parallel(1, 1, 1) - 0.1998248957) < 1e-10);
+    cr_assert(fabs(rp_cf_howell_perpendicular(1, 1, 1) - 0.2000437761) < 1e-10);
     /* point_rect over a whole rectangle seen from below its centre
      * against the unit-square limit of C-11's integrand: as c grows the
      * point value tends to A / (pi c^2). */
@@ -241,14 +221,14 @@ Test(formfactor, analytic_meshed_rectangles_match_howell)
     setup(&f, buf, 0.17, 0, (rp_ff_params){.method = RP_FF_ANALYTIC});
     cr_assert_gt(rp_mesh_nelements(f.mesh), 20);
     double fab = surf_ff(&f, "A", "B", NULL, NULL), fba = surf_ff(&f, "B", "A", NULL, NULL);
-    cr_expect(fabs(fab / howell_c14(0.37, 1.9, 0.61) - 1) < 1e-5, "F_AB %.10g", fab);
-    cr_expect(fabs(fba / howell_c14(1.9, 0.37, 0.61) - 1) < 1e-5, "F_BA %.10g", fba);
+    cr_expect(fabs(fab / rp_cf_howell_perpendicular(0.37, 1.9, 0.61) - 1) < 1e-5, "F_AB %.10g", fab);
+    cr_expect(fabs(fba / rp_cf_howell_perpendicular(1.9, 0.37, 0.61) - 1) < 1e-5, "F_BA %.10g", fba);
     teardown(&f);
 
     parallel_scene(buf, sizeof buf, 0.37, 1.9, 0.61);
     setup(&f, buf, 0.13, 0, (rp_ff_params){.method = RP_FF_ANALYTIC});
     fab = surf_ff(&f, "A", "B", NULL, NULL);
-    cr_expect(fabs(fab / howell_c11(0.37, 1.9, 0.61) - 1) < 1e-5, "F_AB %.10g", fab);
+    cr_expect(fabs(fab / rp_cf_howell_parallel(0.37, 1.9, 0.61) - 1) < 1e-5, "F_AB %.10g", fab);
     teardown(&f);
 }
 
@@ -269,8 +249,8 @@ Test(formfactor, analytic_triangles_sum_to_howell)
     setup(&f, buf, 100, 0, (rp_ff_params){.method = RP_FF_ANALYTIC});
     const char *A[] = {"A1", "A2", NULL}, *B[] = {"B1", "B2", NULL};
     double fab = group_ff(&f, A, B, NULL, NULL), fba = group_ff(&f, B, A, NULL, NULL);
-    cr_expect(fabs(fab / howell_c14(w, h, l) - 1) < 1e-5, "F_AB %.10g vs %.10g", fab, howell_c14(w, h, l));
-    cr_expect(fabs(fba / howell_c14(h, w, l) - 1) < 1e-5, "F_BA %.10g vs %.10g", fba, howell_c14(h, w, l));
+    cr_expect(fabs(fab / rp_cf_howell_perpendicular(w, h, l) - 1) < 1e-5, "F_AB %.10g vs %.10g", fab, rp_cf_howell_perpendicular(w, h, l));
+    cr_expect(fabs(fba / rp_cf_howell_perpendicular(h, w, l) - 1) < 1e-5, "F_BA %.10g vs %.10g", fba, rp_cf_howell_perpendicular(h, w, l));
     teardown(&f);
 }
 
@@ -287,7 +267,7 @@ Test(formfactor, analytic_clipped_pairs_match_howell_algebra)
              HEAD "quad A e 0 0 %.17g  0 0 %.17g  %.17g 0 %.17g  %.17g 0 %.17g\n"
                   "quad B w 0 %.17g 0  %.17g %.17g 0  %.17g %.17g 0  0 %.17g 0\n",
              g, g + w, l, g + w, l, g, -below, l, -below, l, h, h);
-    const double fab = ((w + g) * howell_c14(w + g, h, l) - g * howell_c14(g, h, l)) / w;
+    const double fab = ((w + g) * rp_cf_howell_perpendicular(w + g, h, l) - g * rp_cf_howell_perpendicular(g, h, l)) / w;
     const double fba = w * l * fab / ((h + below) * l);
     const double edges[2] = {100, 0.1};
     for (int m = 0; m < 2; m++) {
@@ -410,7 +390,7 @@ Test(formfactor, visibility_blocker_and_bystander)
     double rays = 0;
     double fab = surf_ff(&f, "A", "B", NULL, &rays);
     cr_expect_eq(rays, 0, "%g rays cast for an unblockable pair", rays);
-    cr_expect(fabs(fab / howell_c11(a, b, c) - 1) < 1e-5, "F_AB %.10g", fab);
+    cr_expect(fabs(fab / rp_cf_howell_parallel(a, b, c) - 1) < 1e-5, "F_AB %.10g", fab);
     teardown(&f);
 }
 
@@ -457,7 +437,7 @@ Test(formfactor, montecarlo_within_three_standard_errors)
         fixture f;
         parallel_scene(buf, sizeof buf, a, b, c);
         setup(&f, buf, 100, 1, (rp_ff_params){.method = RP_FF_MONTECARLO, .samples = 100000, .seed = 5});
-        double se = 0, fab = surf_ff(&f, "A", "B", &se, NULL), ref = howell_c11(a, b, c);
+        double se = 0, fab = surf_ff(&f, "A", "B", &se, NULL), ref = rp_cf_howell_parallel(a, b, c);
         cr_expect(se > 0 && se < 0.05 * ref, "standard error %g", se);
         cr_expect(fabs(fab - ref) < 3 * se, "C-11 %g %g %g: %.6f +- %.2g vs %.6f", a, b, c, fab, se, ref);
         teardown(&f);
@@ -470,7 +450,7 @@ Test(formfactor, montecarlo_standard_error_is_honest)
      * 0.1% and 99.9% points are 6.0 and 45.3. */
     char buf[1024];
     parallel_scene(buf, sizeof buf, 0.37, 1.9, 0.61);
-    const double ref = howell_c11(0.37, 1.9, 0.61);
+    const double ref = rp_cf_howell_parallel(0.37, 1.9, 0.61);
     double chi2 = 0;
     for (int seed = 0; seed < 20; seed++) {
         fixture f;
@@ -573,7 +553,7 @@ Test(formfactor, hemicube_error_falls_with_resolution)
      * to aliasing). */
     char buf[1024];
     parallel_scene(buf, sizeof buf, 0.37, 1.9, 0.61);
-    const double ref = howell_c11(0.37, 1.9, 0.61);
+    const double ref = rp_cf_howell_parallel(0.37, 1.9, 0.61);
     double err[2];
     const unsigned res[2] = {64, 512};
     for (int r = 0; r < 2; r++) {
@@ -674,7 +654,7 @@ Test(formfactor, nearly_touching_plates_match_howell)
     setup(&f, buf, 0.12, 0, (rp_ff_params){.method = RP_FF_ANALYTIC});
     size_t n = rp_mesh_nelements(f.mesh);
     cr_assert_gt(n, 100);
-    double fab = surf_ff(&f, "A", "B", NULL, NULL), ref = howell_c11(a, b, c);
+    double fab = surf_ff(&f, "A", "B", NULL, NULL), ref = rp_cf_howell_parallel(a, b, c);
     cr_expect(fabs(fab / ref - 1) < 1e-5, "F_AB %.10g vs C-11 %.10g (%.2e)", fab, ref, fab / ref - 1);
     float *row = malloc(n * sizeof *row);
     double worst = 0;

@@ -181,32 +181,13 @@ static uint32_t surface(const rp_scene *sc, const char *name)
 
 /* ------------------------------------------------ Howell's form factors */
 
-/* C-11: directly opposed parallel a x b rectangles at distance c. */
-static double howell_parallel(double a, double b, double c)
-{
-    double X = a / c, Y = b / c, X2 = X * X, Y2 = Y * Y;
-    return 2.0 / (M_PI * X * Y) *
-           (0.5 * log((1 + X2) * (1 + Y2) / (1 + X2 + Y2)) + X * sqrt(1 + Y2) * atan(X / sqrt(1 + Y2)) +
-            Y * sqrt(1 + X2) * atan(Y / sqrt(1 + X2)) - X * atan(X) - Y * atan(Y));
-}
-
-/* C-14: perpendicular rectangles sharing an edge of length l, from the one
- * of width w to the one of height h. */
-static double howell_perpendicular(double w, double h, double l)
-{
-    double W = w / l, H = h / l, W2 = W * W, H2 = H * H, S = W2 + H2;
-    double t = (1 + W2) * (1 + H2) / (1 + S) * pow(W2 * (1 + S) / ((1 + W2) * S), W2) *
-               pow(H2 * (1 + S) / ((1 + H2) * S), H2);
-    return 1.0 / (M_PI * W) * (W * atan(1 / W) + H * atan(1 / H) - sqrt(S) * atan(1 / sqrt(S)) + 0.25 * log(t));
-}
-
 Test(pathtrace, howell_formulas_match_catalogue)
 {
     /* The implementations above against docs/ground-truth.md's values, and the
      * closure of the unit cube. */
-    cr_assert_float_eq(howell_parallel(1, 1, 1), 0.1998248957, 1e-10);
-    cr_assert_float_eq(howell_perpendicular(1, 1, 1), 0.2000437761, 1e-10);
-    cr_assert_float_eq(howell_parallel(1, 1, 1) + 4 * howell_perpendicular(1, 1, 1), 1.0, 1e-9);
+    cr_assert_float_eq(rp_cf_howell_parallel(1, 1, 1), 0.1998248957, 1e-10);
+    cr_assert_float_eq(rp_cf_howell_perpendicular(1, 1, 1), 0.2000437761, 1e-10);
+    cr_assert_float_eq(rp_cf_howell_parallel(1, 1, 1) + 4 * rp_cf_howell_perpendicular(1, 1, 1), 1.0, 1e-9);
 }
 
 /* ------------------------------------------------------------- samplers */
@@ -456,10 +437,10 @@ static void plates_check(const char *scene, double F)
     rp_scene_destroy(sc);
 }
 
-Test(pathtrace, plates_parallel) { plates_check("plates-parallel.scene", howell_parallel(1, 1, 1)); }
+Test(pathtrace, plates_parallel) { plates_check("plates-parallel.scene", rp_cf_howell_parallel(1, 1, 1)); }
 Test(pathtrace, plates_perpendicular)
 {
-    plates_check("plates-perpendicular.scene", howell_perpendicular(1, 1, 1));
+    plates_check("plates-perpendicular.scene", rp_cf_howell_perpendicular(1, 1, 1));
 }
 
 /* Slope of log(y) against log(N) by least squares (gsl_fit_linear). */
@@ -486,7 +467,7 @@ Test(pathtrace, error_falls_as_inverse_sqrt_n)
      * N^-1/2: slope below -0.6. */
     rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
     uint32_t rc = surface(sc, "receiver");
-    double want = 0.5 * howell_parallel(1, 1, 1);
+    double want = 0.5 * rp_cf_howell_parallel(1, 1, 1);
     enum { NPTS = 5, SEEDS = 32 };
     double N[NPTS], se[NPTS] = {0}, ms[2][NPTS] = {{0}};
     const char *samplers[2] = {"random", "sobol"};
@@ -586,7 +567,7 @@ Test(pathtrace, cube_ceiling_direct_is_closed_form)
     probe p = probe_surfaces(sc, 8, 0, "samples", "65536", "batch", "16384", "max-depth", "1", "sampler",
                              "random", NULL);
     const char *walls[] = {"wall-x0", "wall-x1", "wall-z0", "wall-z1"};
-    double Ff = howell_parallel(1, 1, 1), Fw = howell_perpendicular(1, 1, 1);
+    double Ff = rp_cf_howell_parallel(1, 1, 1), Fw = rp_cf_howell_perpendicular(1, 1, 1);
     uint32_t fl = surface(sc, "floor"), ce = surface(sc, "ceiling");
     cr_assert_lt(fabs(p.L[fl] - 0.5 * Ff), 3 * p.se[fl], "floor %.6f +- %.2e want %.6f", p.L[fl], p.se[fl],
                  0.5 * Ff);

@@ -281,27 +281,9 @@ Test(radiosity, jacobi_residual_ratio_is_rho, .init = setup, .timeout = 120)
 
 /* ---- closed forms -------------------------------------------------------- */
 
-/* Howell C-11: directly opposed parallel rectangles a x b at distance c. */
-static double howell_parallel(double a, double b, double c)
-{
-    double X = a / c, Y = b / c, X2 = X * X, Y2 = Y * Y;
-    return 2.0 / (PI * X * Y) *
-           (0.5 * log((1 + X2) * (1 + Y2) / (1 + X2 + Y2)) + X * sqrt(1 + Y2) * atan(X / sqrt(1 + Y2)) +
-            Y * sqrt(1 + X2) * atan(Y / sqrt(1 + X2)) - X * atan(X) - Y * atan(Y));
-}
-
-/* Howell C-14: perpendicular rectangles with a common edge l. */
-static double howell_perpendicular(double w, double h, double l)
-{
-    double W = w / l, H = h / l, W2 = W * W, H2 = H * H, S = W2 + H2;
-    double t = (1 + W2) * (1 + H2) / (1 + S) * pow(W2 * (1 + S) / ((1 + W2) * S), W2) *
-               pow(H2 * (1 + S) / ((1 + H2) * S), H2);
-    return 1.0 / (PI * W) * (W * atan(1 / W) + H * atan(1 / H) - sqrt(S) * atan(1 / sqrt(S)) + 0.25 * log(t));
-}
-
 Test(radiosity, six_patch_cube_closed_form, .init = setup)
 {
-    double Fo = howell_parallel(1, 1, 1), Fa = howell_perpendicular(1, 1, 1);
+    double Fo = rp_cf_howell_parallel(1, 1, 1), Fa = rp_cf_howell_perpendicular(1, 1, 1);
     cr_assert_float_eq(Fo, 0.1998248957, 1e-9);
     cr_assert_float_eq(Fa, 0.2000437761, 1e-9);
     /* Unknowns L_ceiling, L_floor, L_wall (four walls alike), rho 0.5,

@@ -38,6 +38,7 @@
 #include "geometry/scene.h"
 #include "scene_util.h"
 #include "solvers/solver.h"
+#include "closed_form.h"
 
 #define PI 3.14159265358979323846
 
@@ -102,14 +103,6 @@ static rp_scene *cube_patches(int mixed, double *mean_le)
 
 /* Howell's catalog C-11: directly opposed parallel a x b rectangles at
  * distance c (docs/ground-truth.md). */
-static double howell_parallel(double a, double b, double c)
-{
-    double X = a / c, Y = b / c, X2 = X * X, Y2 = Y * Y;
-    double t = 0.5 * log((1 + X2) * (1 + Y2) / (1 + X2 + Y2)) + X * sqrt(1 + Y2) * atan(X / sqrt(1 + Y2)) +
-               Y * sqrt(1 + X2) * atan(Y / sqrt(1 + X2)) - X * atan(X) - Y * atan(Y);
-    return 2.0 / (PI * X * Y) * t;
-}
-
 /* ---- running a method -------------------------------------------------- */
 
 #define MAX_OPTS 16
@@ -320,7 +313,7 @@ Test(stochastic, stderr_per_element, .init = setup)
 Test(stochastic, parallel_plates, .init = setup)
 {
     rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
-    double F = howell_parallel(1, 1, 1);
+    double F = rp_cf_howell_parallel(1, 1, 1);
     cr_assert(fabs(F - 0.1998248957) < 1e-9, "Howell C-11 = %.10f", F);
     const double expect = 0.5 * F * 1.0; /* rho2 F21 Le1 */
     uint32_t recv = rp_scene_find_surface(sc, "receiver"), emit = rp_scene_find_surface(sc, "emitter");
@@ -353,7 +346,7 @@ Test(stochastic, parallel_plates, .init = setup)
 Test(stochastic, convergence_rate, .init = setup)
 {
     rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
-    const double expect = 0.5 * howell_parallel(1, 1, 1);
+    const double expect = 0.5 * rp_cf_howell_parallel(1, 1, 1);
     uint32_t recv = rp_scene_find_surface(sc, "receiver");
     enum { NRUNS = 15 };
     double x[NRUNS], y[NRUNS], zsq = 0;
