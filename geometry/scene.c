@@ -75,6 +75,7 @@
 #include <string.h>
 
 #include "cgal/import.h"
+#include "hash.h"
 
 #define RELATIVE_COLLINEAR 1e-10 /* sine of the smallest corner angle */
 #define RELATIVE_TWIST 1e-6      /* quad twist / longest diagonal */
@@ -1807,15 +1808,8 @@ typedef struct fnv {
     uint64_t h;
 } fnv;
 
-/* FNV-1a, 64 bit (Fowler, Noll, Vo). */
-static void fnv_bytes(fnv *f, const void *data, size_t n)
-{
-    const unsigned char *b = data;
-    for (size_t i = 0; i < n; i++) {
-        f->h ^= b[i];
-        f->h *= UINT64_C(0x100000001b3);
-    }
-}
+/* FNV-1a, 64 bit (hash.h). */
+static void fnv_bytes(fnv *f, const void *data, size_t n) { f->h = rp_fnv1a64(f->h, data, n); }
 
 /* Integers and doubles are hashed as little-endian bytes so the hash does
  * not depend on the host. */
@@ -1847,7 +1841,7 @@ static void fnv_vec(fnv *f, rp_vec3 v)
 
 void rp_scene_hash(const rp_scene *s, char out[17])
 {
-    fnv f = {UINT64_C(0xcbf29ce484222325)};
+    fnv f = {RP_FNV1A64_INIT};
     fnv_string(&f, "radpt scene 1");
     fnv_u64(&f, (uint64_t)s->band_kind);
     fnv_u64(&f, s->nbands);

@@ -2,6 +2,7 @@
  * gsl_root_fsolver_alloc / _iterate / _free around a const type). */
 #include "solver.h"
 
+#include "../geometry/hash.h"
 #include "../geometry/raycast.h"
 
 #include <errno.h>
@@ -139,16 +140,7 @@ rp_status rp_options_check(const rp_options *o, const rp_solver_type *type, rp_e
 #define RP_STATE_MAX_NAME 256
 #define RP_STATE_MAX_BYTES (UINT64_C(1) << 40)
 
-static uint64_t fnv1a64(const unsigned char *p, size_t n)
-{
-    /* FNV-1a, 64 bits (Fowler, Noll & Vo) */
-    uint64_t h = UINT64_C(0xcbf29ce484222325);
-    for (size_t i = 0; i < n; i++) {
-        h ^= p[i];
-        h *= UINT64_C(0x100000001b3);
-    }
-    return h;
-}
+static uint64_t fnv1a64(const unsigned char *p, size_t n) { return rp_fnv1a64(RP_FNV1A64_INIT, p, n); }
 
 int rp_solver_put_u64(FILE *f, const uint64_t *v, size_t n)
 {

@@ -22,19 +22,16 @@
 #include "bench/report/plot.h"
 #include "bench/experiments/exp_internal.h"
 #include "bench/run/load.h"
+#include "bench/run/log.h"
 
 /* ------------------------------------------------------------- helpers */
 
 void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
 {
-    if (!p->log)
-        return;
-    char msg[1024];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
+    rp_vlogf(p->log, p->log_ctx, fmt, ap);
     va_end(ap);
-    p->log(p->log_ctx, msg);
 }
 
 static int is_file(const char *path)

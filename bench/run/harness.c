@@ -12,6 +12,7 @@
 
 #include "bench/report/files.h"
 #include "bench/run/clock.h"
+#include "bench/run/log.h"
 
 /* ------------------------------------------------------------- specs */
 
@@ -478,22 +479,7 @@ void rp_bench_summarise(rp_bench *b)
 
 /* ------------------------------------------------- journal records */
 
-static void bench_log(const rp_bench *b, const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 2, 3)))
-#endif
-    ;
-static void bench_log(const rp_bench *b, const char *fmt, ...)
-{
-    if (!b->params.log)
-        return;
-    char msg[1400];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
-    va_end(ap);
-    b->params.log(b->params.log_ctx, msg);
-}
+#define bench_log(b, ...) rp_logf((b)->params.log, (b)->params.log_ctx, __VA_ARGS__)
 
 /* A finished run as journal numbers: status, rows, surface values, then
  * each row's fields; the error text under KEY#error, a kept image in

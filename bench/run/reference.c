@@ -1,6 +1,7 @@
 /* References and their cache (reference.h). */
 #include "bench/run/reference.h"
 
+#include "geometry/hash.h"
 #include <errno.h>
 #include <inttypes.h>
 #include <math.h>
@@ -24,13 +25,7 @@
 
 void rp_hash_text(const char *text, char out[17])
 {
-    /* FNV-1a, 64 bits (Fowler, Noll & Vo) */
-    uint64_t h = UINT64_C(0xcbf29ce484222325);
-    for (const unsigned char *c = (const unsigned char *)text; *c; c++) {
-        h ^= *c;
-        h *= UINT64_C(0x100000001b3);
-    }
-    snprintf(out, 17, "%016" PRIx64, h);
+    snprintf(out, 17, "%016" PRIx64, rp_fnv1a64(RP_FNV1A64_INIT, text, strlen(text)));
 }
 
 /* ------------------------------------------------------------- furnace */
