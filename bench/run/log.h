@@ -12,9 +12,6 @@
 void rp_logf(rp_log_fn log, void *ctx, const char *fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 3, 4)))
-/* The same with a va_list, for other printf-style wrappers. */
-void rp_vlogf(rp_log_fn log, void *ctx, const char *fmt, va_list ap);
-
 #endif
     ;
 
