@@ -638,6 +638,12 @@ static void md_fit(FILE *f, const rp_fit *fit)
         fputs("n/a", f);
         return;
     }
+    /* an error that did not change (the method met its rule before the
+     * first checkpoint) has no rate: not a slope of "-0.000" */
+    if (fabs(fit->slope) < 5e-4 && fabs(fit->hi - fit->lo) < 1e-3) {
+        fputs("n/a (no change: converged)", f);
+        return;
+    }
     fprintf(f, "%.3f [%.3f, %.3f]", fit->slope, fit->lo, fit->hi);
 }
 
