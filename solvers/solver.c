@@ -6,6 +6,7 @@
 #include "../geometry/raycast.h"
 
 #include <errno.h>
+#include <stddef.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,7 +32,13 @@ rp_status rp_solver_create(const rp_solver_type *type, const rp_scene *scene,
         free(s);
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     }
-    st = type->init(s->state, scene, options, err);
+    /* the type's specs go with the options: defaults come from them */
+    rp_options with = {.size = sizeof with};
+    if (options)
+        memcpy(&with, options, options->size < sizeof with ? options->size : sizeof with);
+    with.size = sizeof with;
+    with.specs = type->options;
+    st = type->init(s->state, scene, &with, err);
     if (st != RP_OK) {
         /* init cleans up after itself on failure; fini must accept the
          * zeroed or partly built state as well. */
@@ -82,10 +89,26 @@ const char *rp_options_get(const rp_options *o, const char *name)
     return found;
 }
 
+/* The fallback text of name's spec, when it is all a number. */
+static const char *numeric_fallback(const rp_options *o, const char *name)
+{
+    if (!o || o->size < offsetof(rp_options, specs) + sizeof o->specs || !o->specs)
+        return NULL;
+    for (const rp_option_spec *sp = o->specs; sp->name; sp++)
+        if (strcmp(sp->name, name) == 0 && sp->fallback) {
+            char *end;
+            (void)strtod(sp->fallback, &end);
+            return end != sp->fallback && *end == '\0' ? sp->fallback : NULL;
+        }
+    return NULL;
+}
+
 rp_status rp_options_double(const rp_options *o, const char *name, double lo, double hi,
                             double *out, rp_error *err)
 {
     const char *v = rp_options_get(o, name);
+    if (!v)
+        v = numeric_fallback(o, name);
     if (!v)
         return RP_OK;
     char *end;
@@ -103,6 +126,8 @@ rp_status rp_options_uint(const rp_options *o, const char *name, unsigned long l
                           unsigned long hi, unsigned long *out, rp_error *err)
 {
     const char *v = rp_options_get(o, name);
+    if (!v)
+        v = numeric_fallback(o, name);
     if (!v)
         return RP_OK;
     char *end;

@@ -54,6 +54,11 @@ typedef struct rp_options {
      * return RP_ERR_INTERRUPTED when they stop for it; the state is then
      * only good for fini. */
     const atomic_int *cancel;
+    /* The method's option specs, set by rp_solver_create: an option absent
+     * from keys takes its spec's `fallback` in rp_options_double and
+     * rp_options_uint, so a default is written once, in the spec that
+     * --help shows.  NULL: no fallbacks. */
+    const rp_option_spec *specs;
 } rp_options;
 
 /* 1 once cancellation has been asked for (cancel may be NULL). */
@@ -171,8 +176,10 @@ int rp_solver_get_f64(FILE *f, double *v, size_t n);
 
 /* Option look-up for methods: the value given for name, or NULL. */
 const char *rp_options_get(const rp_options *o, const char *name);
-/* Parses a numeric option into *out (left alone when absent); a malformed
- * or out-of-range value is RP_ERR_INPUT with a message naming the option. */
+/* Parses a numeric option into *out; absent, its spec's fallback (when the
+ * options carry the specs and the fallback is a number), else *out is left
+ * alone.  A malformed or out-of-range value is RP_ERR_INPUT with a message
+ * naming the option. */
 rp_status rp_options_double(const rp_options *o, const char *name, double lo, double hi,
                             double *out, rp_error *err);
 rp_status rp_options_uint(const rp_options *o, const char *name, unsigned long lo,

@@ -464,3 +464,40 @@ Test(harness, tiny_bench_files_agree, .timeout = 120)
     rp_scene_destroy(scene);
     remove_tree(dir);
 }
+
+/* Defaults live once, in the option specs --help shows: an absent option
+ * takes its spec's numeric fallback; a given one wins; no specs, no
+ * default (the caller's value stays). */
+Test(harness, option_defaults_come_from_the_specs)
+{
+    static const rp_option_spec specs[] = {
+        {"tolerance", "EPS", "stop at EPS", "1e-6"},
+        {"rays", "N", "rays", "100000"},
+        {"mode", "a|b", "a word", "a"},
+        {NULL, NULL, NULL, NULL},
+    };
+    const char *keys[1] = {"rays"}, *values[1] = {"7"};
+    rp_options o = {.size = sizeof o, .keys = keys, .values = values, .count = 1, .specs = specs};
+    rp_error err;
+    double tol = -1;
+    unsigned long rays = 0;
+    cr_assert_eq(rp_options_double(&o, "tolerance", 0, 1, &tol, &err), RP_OK);
+    cr_expect_eq(tol, 1e-6);
+    cr_assert_eq(rp_options_uint(&o, "rays", 1, 1000000, &rays, &err), RP_OK);
+    cr_expect_eq(rays, 7);
+    o.specs = NULL;
+    tol = -1;
+    cr_assert_eq(rp_options_double(&o, "tolerance", 0, 1, &tol, &err), RP_OK);
+    cr_expect_eq(tol, -1);
+    /* every registered method: each numeric fallback is within what its own
+     * init accepts, so creating it with no options at all must work for a
+     * scene it can solve */
+    rp_scene *scene = rp_test_load("scenes/furnace.scene");
+    for (const rp_solver_type *const *t = rp_solver_types(); *t; t++) {
+        rp_options none = {.size = sizeof none, .want = RP_WANT_SURFACES, .seed = 1};
+        rp_solver *s = NULL;
+        cr_expect_eq(rp_solver_create(*t, scene, &none, &s, &err), RP_OK, "%s: %s", (*t)->name, err.message);
+        rp_solver_destroy(s);
+    }
+    rp_scene_destroy(scene);
+}

@@ -259,11 +259,9 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     rp_status st;
     s->bf_rel = atof(HIER_DEFAULT_BF);
     s->min_area_rel = atof(HIER_DEFAULT_MIN_AREA);
-    s->partial_weight = 10;
-    s->invisible_weight = 0.25;
-    s->tolerance = 1e-6;
-    s->cl_area_rel = 1e-3;
-    unsigned long vis = 16, maxit = 1000, spp = 16, gr = 16, crays = 16, cfrays = 4, vr = 1, cl = 1;
+    /* the other defaults: the option specs' fallbacks (rp_options_double,
+     * rp_options_uint), written once, where --help reads them */
+    unsigned long vis = 0, maxit = 0, spp = 0, gr = 0, crays = 0, cfrays = 0, vr = 0, cl = 0;
     s->max_faces = HIER_DEFAULT_MAX_FACES;
     if ((st = rp_options_double(o, "bf-epsilon", 0, 1e6, &s->bf_rel, err)) != RP_OK ||
         (st = rp_options_double(o, "min-area", 1e-15, 1, &s->min_area_rel, err)) != RP_OK ||

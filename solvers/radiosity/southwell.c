@@ -119,10 +119,9 @@ static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o
 {
     sw_state *s = state;
     rp_status st;
-    double cache_mib = 16;
+    double cache_mib = 0; /* defaults: the option specs' fallbacks (rp_options_double) */
     if ((st = rp_options_double(o, "row-cache", 0, 1 << 20, &cache_mib, err)) != RP_OK)
         return st;
-    s->overshoot = 1;
     if ((st = rp_options_double(o, "overshoot", 1, 2, &s->overshoot, err)) != RP_OK)
         return st;
     if (!(s->overshoot < 2))

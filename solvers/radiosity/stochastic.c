@@ -178,8 +178,8 @@ static rp_status sj_parse(sj_state *s, const rp_options *o, rp_mesh_params *mp, 
     if ((st = rp_rad_mesh_params("stochastic-jacobi", o, mp, err)) != RP_OK)
         return st;
 
-    unsigned long K = 16;
-    *rays = 100000;
+    unsigned long K = 0; /* defaults: the option specs' fallbacks (rp_options_uint) */
+    *rays = 0;
     if ((st = rp_options_uint(o, "rays", 1, (unsigned long)UINT32_MAX, rays, err)) != RP_OK)
         return st;
     if ((st = rp_options_uint(o, "batches", 2, 65536, &K, err)) != RP_OK)
@@ -192,10 +192,9 @@ static rp_status sj_parse(sj_state *s, const rp_options *o, rp_mesh_params *mp, 
     s->M = *rays / K;
 
     int open_ended = o ? o->open_ended : 0;
-    s->unshot_eps = 1e-3;
     if ((st = rp_options_double(o, "unshot", 0, 1, &s->unshot_eps, err)) != RP_OK)
         return st;
-    unsigned long regular = 10;
+    unsigned long regular = 0;
     if ((st = rp_options_uint(o, "regular", 0, ULONG_MAX - 1, &regular, err)) != RP_OK)
         return st;
     /* Under the harness's own budget a rule stops the run only when its

@@ -108,7 +108,7 @@ static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, c
     if ((st = rp_options_double(o, "ff-tolerance", 1e-14, 0.1, &s->ffp.tolerance, err)) != RP_OK)
         return st;
 
-    s->tolerance = 1e-6;
+    /* defaults: the option specs' fallbacks (rp_options_double) */
     if ((st = rp_options_double(o, "tolerance", 0, 1, &s->tolerance, err)) != RP_OK)
         return st;
     s->tolerance_given = rp_options_get(o, "tolerance") != NULL;
