@@ -501,3 +501,26 @@ Test(harness, option_defaults_come_from_the_specs)
     }
     rp_scene_destroy(scene);
 }
+
+/* Chart colours are fixed per method name, in every report: distinct
+ * between methods, the same for a method's variants, which differ by dash
+ * type from the plain spec. */
+Test(harness, method_chart_styles_are_fixed)
+{
+    char a[64], b[64];
+    snprintf(a, sizeof a, "%s", rp_plot_method_style("pathtrace"));
+    snprintf(b, sizeof b, "%s", rp_plot_method_style("pathtrace"));
+    cr_expect_str_eq(a, b);
+    const char *names[] = {"pathtrace", "gauss-seidel", "jacobi", "southwell", "stochastic-jacobi", "hierarchical"};
+    char colours[6][16];
+    for (int i = 0; i < 6; i++) {
+        const char *s = strstr(rp_plot_method_style(names[i]), "'#");
+        cr_assert_not_null(s);
+        snprintf(colours[i], sizeof colours[i], "%.9s", s);
+        for (int k = 0; k < i; k++)
+            cr_expect_str_neq(colours[i], colours[k], "%s and %s share %s", names[i], names[k], colours[i]);
+    }
+    snprintf(b, sizeof b, "%s", rp_plot_method_style("pathtrace:sampler=random"));
+    cr_expect(strstr(b, colours[0]) != NULL, "%s", b);
+    cr_expect_str_neq(a, b, "a variant's dash type differs");
+}

@@ -131,3 +131,34 @@ void rp_image_to_rgb(const rp_scene *scene, const float *img, size_t npix, float
     }
 }
 
+
+/* Fixed colours per method name (Dark2 and Set1 hues), the same in every
+ * chart of every report; variants of one method (its options) keep the
+ * colour and take a dash type from a hash of the spec. */
+const char *rp_plot_method_style(const char *spec)
+{
+    static const struct {
+        const char *name, *colour;
+    } colours[] = {
+        {"pathtrace", "#1b9e77"},     {"gauss-seidel", "#d95f02"}, {"jacobi", "#e6ab02"},
+        {"southwell", "#7570b3"},     {"stochastic-jacobi", "#e7298a"}, {"hierarchical", "#66a61e"},
+        {"direct", "#a6761d"},
+    };
+    static char buf[8][64];
+    static int next;
+    size_t len = strcspn(spec, ":");
+    const char *colour = "#666666";
+    for (size_t i = 0; i < sizeof colours / sizeof colours[0]; i++)
+        if (strlen(colours[i].name) == len && strncmp(colours[i].name, spec, len) == 0)
+            colour = colours[i].colour;
+    int dt = 1;
+    if (spec[len] == ':') {
+        unsigned h = 2166136261u;
+        for (const char *c = spec + len; *c; c++)
+            h = (h ^ (unsigned char)*c) * 16777619u;
+        dt = 2 + (int)(h % 4);
+    }
+    char *out = buf[next++ % 8];
+    snprintf(out, sizeof buf[0], "lc rgb '%s' dt %d", colour, dt);
+    return out;
+}

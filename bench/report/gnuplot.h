@@ -31,4 +31,9 @@ void rp_colormap(double t, float rgb[3]);
  * 1931 observer.  r, g, b have npix values each. */
 void rp_image_to_rgb(const rp_scene *scene, const float *img, size_t npix, float *r, float *g, float *b);
 
+/* A gnuplot line style for a method spec: a colour fixed by the method's
+ * name (the same in every report) and, for a spec with options, a dash type
+ * of its own ("lc rgb '#1b9e77' dt 3").  Valid until 8 more calls. */
+const char *rp_plot_method_style(const char *spec);
+
 #endif

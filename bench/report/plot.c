@@ -396,8 +396,8 @@ static void gp_plot_methods(FILE *f, const rp_bench *b, const char *using, const
     for (size_t mi = 0; mi < b->nmethods; mi++) {
         if (!b->summary[mi].npts)
             continue;
-        fprintf(f, "%s'data/m%zu.dat' using %s with %s lw 2 pt 7 ps 0.8 title ", first ? "" : ", \\\n     ", mi,
-                using, style);
+        fprintf(f, "%s'data/m%zu.dat' using %s with %s %s lw 2 pt 7 ps 0.8 title ", first ? "" : ", \\\n     ", mi,
+                using, style, rp_plot_method_style(b->methods[mi].text));
         gp_title(f, b->methods[mi].text);
         first = 0;
     }
@@ -473,17 +473,19 @@ static rp_status write_plots_gp(const rp_bench *b, const char *dir, const rp_ben
                    "set xrange [*:*] reverse\n",
                 xtime);
         if (isfinite(b->target))
-            fprintf(f, "set arrow 1 from %.6g, graph 0 to %.6g, graph 1 nohead dt 2 lc rgb '#777777'\n", b->target,
-                    b->target);
+            fprintf(f, "set arrow 1 from %.6g, graph 0 to %.6g, graph 1 nohead dt 2 lc rgb '#777777'\n"
+                       "set label 1 'target RMSE %.3g' at %.6g, graph 0.98 rotate by 90 right offset -1,0 "
+                       "tc rgb '#555555'\n",
+                    b->target, b->target, b->target, b->target);
         fprintf(f, "plot ");
         for (size_t mi = 0; mi < b->nmethods; mi++) {
-            fprintf(f, "%s'data/time_to_error.dat' index %zu using 1:2 with lines lw 2 title ", mi ? ", \\\n     " : "",
-                    mi);
+            fprintf(f, "%s'data/time_to_error.dat' index %zu using 1:2 with lines %s lw 2 title ",
+                    mi ? ", \\\n     " : "", mi, rp_plot_method_style(b->methods[mi].text));
             gp_title(f, b->methods[mi].text);
         }
         fprintf(f, "\n");
         gp_end(f, "time_to_error");
-        fprintf(f, "unset arrow 1\nset xrange [*:*] noreverse\n");
+        fprintf(f, "unset arrow 1\nunset label 1\nset xrange [*:*] noreverse\n");
         }
     }
     if (any_surface(b)) {
