@@ -25,14 +25,10 @@
 
 rp_status rp_exp_cornell(const rp_experiment_params *p, rp_error *err)
 {
-    char path[1024];
-    rp_scene *scene = NULL;
-    rp_experiment_setting set;
-    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
+    rp_exp_start x;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &x, err);
     if (st != RP_OK)
         return st;
-    char methods[1024];
-    rp_exp_describe_methods(set.methods, methods, sizeof methods);
     char preface[2400];
     snprintf(preface, sizeof preface,
              "Every method on the Cornell box at equal time (%g s per run, %u seeds per Monte Carlo method): "
@@ -43,11 +39,11 @@ rp_status rp_exp_cornell(const rp_experiment_params *p, rp_error *err)
              "Salzman & Aupperle 1991 (Gouraud images from vertex values gathered through its links), "
              "stochastic-jacobi is Monte Carlo radiosity. A radiosity curve flattens at its mesh's "
              "discretisation error, lower for a finer mesh.",
-             set.budget, set.seeds, methods);
+             x.set.budget, x.set.seeds, x.methods);
     rp_bench_output out = {.size = sizeof out, .title = "Experiment cornell: all methods at equal time",
                            .preface = preface, .sheet = 1, .command = p->command};
-    st = rp_exp_run_bench(p, scene, path, set.methods, set.budget, set.seeds, set.reference_spp, &out, p->out_dir,
+    st = rp_exp_run_bench(p, x.scene, x.path, x.set.methods, x.set.budget, x.set.seeds, x.set.reference_spp, &out, p->out_dir,
                           NULL, NULL, err);
-    rp_scene_destroy(scene);
+    rp_scene_destroy(x.scene);
     return st;
 }

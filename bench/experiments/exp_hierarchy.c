@@ -263,29 +263,26 @@ rp_status rp_exp_hierarchy(const rp_experiment_params *p, rp_error *err)
         return rp_error_set(err, RP_ERR_UNSUPPORTED,
                             "experiment hierarchy: the method 'hierarchical' is not registered in this build; "
                             "not available");
-    char path[1024];
-    rp_scene *scene = NULL;
-    rp_experiment_setting set;
-    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
+    rp_exp_start x;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &x, err);
     if (st != RP_OK)
         return st;
-    char methods[1024], preface[1600];
-    rp_exp_describe_methods(set.methods, methods, sizeof methods);
+    char preface[1600];
     snprintf(preface, sizeof preface,
              "Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991) against the classic solvers at equal "
              "time (%g s per run) on the Cornell box: %s.",
-             set.budget, methods);
+             x.set.budget, x.methods);
     rp_bench_output out = {.size = sizeof out, .title = "Experiment hierarchy: hierarchical radiosity",
                            .preface = preface, .sheet = 1, .command = p->command};
     rp_reference *ref = NULL;
-    st = rp_exp_run_bench(p, scene, path, set.methods, set.budget, 1, set.reference_spp, &out, p->out_dir, NULL,
+    st = rp_exp_run_bench(p, x.scene, x.path, x.set.methods, x.set.budget, 1, x.set.reference_spp, &out, p->out_dir, NULL,
                           &ref, err);
     if (st == RP_OK)
-        st = hierarchy_form_factors(p, scene, ref, err);
+        st = hierarchy_form_factors(p, x.scene, ref, err);
     if (st == RP_OK)
-        st = hierarchy_links(p, scene, err);
+        st = hierarchy_links(p, x.scene, err);
     rp_reference_destroy(ref);
-    rp_scene_destroy(scene);
+    rp_scene_destroy(x.scene);
     return st;
 }
 

@@ -30,12 +30,18 @@ void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
  * gnuplot on it; a missing gnuplot is a note (nn chars), not a failure. */
 rp_status rp_exp_draw(const rp_experiment_params *p, const char *body, char *note, size_t nn, rp_error *err);
 
-/* The start every experiment shares: the setting in force (the declared
- * quick or full one, with --budget / --seeds) into *set, and, when
- * scene_file is not NULL, scenes/scene_file found (path, n) and loaded
- * into *scene (warnings printed, default camera where it has none). */
-rp_status rp_exp_begin(const rp_experiment_params *p, const char *scene_file, rp_scene **scene, char *path,
-                       size_t n, rp_experiment_setting *set, rp_error *err);
+/* What every experiment starts from. */
+typedef struct rp_exp_start {
+    rp_experiment_setting set; /* the declared quick or full setting, with --budget / --seeds */
+    char methods[1024];        /* set.methods described for report texts (rp_exp_describe_methods) */
+    char path[1024];           /* the scene file found */
+    rp_scene *scene;           /* loaded (warnings printed, default camera where it has none) */
+} rp_exp_start;
+
+/* The start every experiment shares: the setting in force and, when
+ * scene_file is not NULL, scenes/scene_file found and loaded.  The caller
+ * destroys x->scene. */
+rp_status rp_exp_begin(const rp_experiment_params *p, const char *scene_file, rp_exp_start *x, rp_error *err);
 
 /* What a method list runs, for report texts generated from what ran:
  * "pathtrace (sampler=random, defaults); southwell (elements=250,

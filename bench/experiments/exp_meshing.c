@@ -25,10 +25,8 @@
 
 rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
 {
-    char path[1024];
-    rp_scene *scene = NULL;
-    rp_experiment_setting set;
-    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
+    rp_exp_start x;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &x, err);
     if (st != RP_OK)
         return st;
     /* below about 150 elements the Cornell box's 27 surfaces get one or two
@@ -38,11 +36,11 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
     const unsigned *counts = p->quick ? counts_quick : counts_full;
     size_t nc = p->quick ? 3 : 5;
     static const char *const recon[2] = {"flat", "gouraud"};
-    const double budget = set.budget;
+    const double budget = x.set.budget;
     rp_reference *ref = NULL;
-    rp_reference_params rp = rp_exp_ref_params(p, set.reference_spp);
-    st = rp_reference_get(scene, path, &rp, &ref, err);
-    const double area = rp_scene_total_area(scene);
+    rp_reference_params rp = rp_exp_ref_params(p, x.set.reference_spp);
+    st = rp_reference_get(x.scene, x.path, &rp, &ref, err);
+    const double area = rp_scene_total_area(x.scene);
     typedef struct mrow {
         unsigned target;
         size_t elements;
@@ -57,7 +55,7 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
         w->target = counts[c];
         rp_mesh *mesh = NULL;
         rp_mesh_params mp = {.size = sizeof mp, .target_count = counts[c]};
-        if ((st = rp_mesh_create(scene, &mp, &mesh, err)) != RP_OK)
+        if ((st = rp_mesh_create(x.scene, &mp, &mesh, err)) != RP_OK)
             break;
         w->elements = rp_mesh_nelements(mesh);
         rp_mesh_destroy(mesh);
@@ -93,7 +91,7 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
                                     .stop_when_converged = 1, .progress = p->progress,
                                     .progress_ctx = p->progress_ctx, .cancel = p->cancel};
             rp_trial run;
-            if ((st = rp_harness_run(scene, ref, &m, 1, &hp, &run, err)) != RP_OK)
+            if ((st = rp_harness_run(x.scene, ref, &m, 1, &hp, &run, err)) != RP_OK)
                 break;
             if (run.status == RP_OK && run.ncp) {
                 const rp_checkpoint *cp = &run.cp[run.ncp - 1];
@@ -133,7 +131,7 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
         st = rp_mkdirs(p->out_dir, err);
     }
     rp_out o;
-    if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "meshing.csv"), err)) == RP_OK) {
+    if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(x.path, sizeof x.path, p->out_dir, "meshing.csv"), err)) == RP_OK) {
         fputs("target_elements,elements,h,rmse_flat,rmse_gouraud,surface_err,seconds,converged\n", o.f);
         for (size_t i = 0; i < nrows; i++)
             fprintf(o.f, "%u,%zu,%.6g,%.6g,%.6g,%.6g,%.4g,%d\n", rows[i].target, rows[i].elements, rows[i].h,
@@ -153,7 +151,7 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
             "@SVG\nset output 'meshing.svg'\nreplot\nunset output\nset datafile separator whitespace\n";
         st = rp_exp_draw(p, body, note, sizeof note, err);
     }
-    if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "report.md"), err)) == RP_OK) {
+    if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(x.path, sizeof x.path, p->out_dir, "report.md"), err)) == RP_OK) {
         FILE *f = o.f;
         fprintf(f, "# Experiment meshing: error against element size\n\n"
                    "Gauss-Seidel radiosity on the Cornell box, run to a relative residual of 1e-5 at each mesh "
@@ -187,7 +185,7 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
         st = rp_out_close(&o, 1, err);
     }
     rp_reference_destroy(ref);
-    rp_scene_destroy(scene);
+    rp_scene_destroy(x.scene);
     return st;
 }
 

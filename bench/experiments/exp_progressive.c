@@ -25,14 +25,10 @@
 
 rp_status rp_exp_progressive(const rp_experiment_params *p, rp_error *err)
 {
-    char path[1024];
-    rp_scene *scene = NULL;
-    rp_experiment_setting set;
-    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
+    rp_exp_start x;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &x, err);
     if (st != RP_OK)
         return st;
-    char methods[1024];
-    rp_exp_describe_methods(set.methods, methods, sizeof methods);
     char preface[1600];
     snprintf(preface, sizeof preface,
              "Progressive refinement radiosity (Cohen, Chen, Wallace & Greenberg 1988) on the Cornell box, "
@@ -41,12 +37,12 @@ rp_status rp_exp_progressive(const rp_experiment_params *p, rp_error *err)
              "radiosity. The ambient term makes early images close to the answer in the mean; overshooting "
              "speeds the convergence of the residual. The chart against samples is the error per shot "
              "(samples = shots here).",
-             set.budget, methods);
+             x.set.budget, x.methods);
     rp_bench_output out = {.size = sizeof out, .title = "Experiment progressive: error per shot",
                            .preface = preface, .samples_chart = 1, .samples_label = "shots",
                            .sheet = 1, .command = p->command};
-    st = rp_exp_run_bench_scheduled(p, scene, path, set.methods, RP_SCHEDULE_ITERATIONS, set.budget, 10, 1,
-                                    set.reference_spp, &out, p->out_dir, NULL, NULL, err);
-    rp_scene_destroy(scene);
+    st = rp_exp_run_bench_scheduled(p, x.scene, x.path, x.set.methods, RP_SCHEDULE_ITERATIONS, x.set.budget, 10, 1,
+                                    x.set.reference_spp, &out, p->out_dir, NULL, NULL, err);
+    rp_scene_destroy(x.scene);
     return st;
 }

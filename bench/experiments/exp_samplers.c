@@ -25,10 +25,8 @@
 
 rp_status rp_exp_samplers(const rp_experiment_params *p, rp_error *err)
 {
-    char path[1024];
-    rp_scene *scene = NULL;
-    rp_experiment_setting set;
-    rp_status st = rp_exp_begin(p, "cornell.scene", &scene, path, sizeof path, &set, err);
+    rp_exp_start x;
+    rp_status st = rp_exp_begin(p, "cornell.scene", &x, err);
     if (st != RP_OK)
         return st;
     char preface[1200];
@@ -39,11 +37,11 @@ rp_status rp_exp_samplers(const rp_experiment_params *p, rp_error *err)
              "stratification and scrambled Sobol' do better where the integrand is smooth (docs/ground-truth.md: "
              "about N^-0.75 where visibility edges cross a pixel), less so for the many-dimensional indirect "
              "light. Slopes are fitted against samples per pixel (all rows of all seeds).",
-             set.budget, set.seeds);
+             x.set.budget, x.set.seeds);
     rp_bench_output out = {.size = sizeof out, .title = "Experiment samplers: random, stratified and Sobol'",
                            .preface = preface, .samples_chart = 1, .sheet = 1, .command = p->command};
-    st = rp_exp_run_bench(p, scene, path, set.methods, set.budget, set.seeds, set.reference_spp, &out, p->out_dir,
+    st = rp_exp_run_bench(p, x.scene, x.path, x.set.methods, x.set.budget, x.set.seeds, x.set.reference_spp, &out, p->out_dir,
                           NULL, NULL, err);
-    rp_scene_destroy(scene);
+    rp_scene_destroy(x.scene);
     return st;
 }

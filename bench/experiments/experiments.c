@@ -185,15 +185,16 @@ void rp_exp_dnum(FILE *f, double v)
         fputc('?', f);
 }
 
-rp_status rp_exp_begin(const rp_experiment_params *p, const char *scene_file, rp_scene **scene, char *path,
-                       size_t n, rp_experiment_setting *set, rp_error *err)
+rp_status rp_exp_begin(const rp_experiment_params *p, const char *scene_file, rp_exp_start *x, rp_error *err)
 {
-    *scene = NULL;
-    rp_status st = rp_experiment_setting_of(p, set, err);
+    memset(x, 0, sizeof *x);
+    rp_status st = rp_experiment_setting_of(p, &x->set, err);
+    if (st == RP_OK && x->set.methods)
+        rp_exp_describe_methods(x->set.methods, x->methods, sizeof x->methods);
     if (st == RP_OK && scene_file)
-        st = rp_experiment_scene_path(p, scene_file, path, n, err);
+        st = rp_experiment_scene_path(p, scene_file, x->path, sizeof x->path, err);
     if (st == RP_OK && scene_file)
-        st = rp_load_scene(path, NULL, 1, scene, err);
+        st = rp_load_scene(x->path, NULL, 1, &x->scene, err);
     return st;
 }
 
