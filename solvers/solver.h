@@ -54,7 +54,8 @@ typedef struct rp_options {
      * return RP_ERR_INTERRUPTED when they stop for it; the state is then
      * only good for fini. */
     const atomic_int *cancel;
-    /* The method's option specs, set by rp_solver_create: an option absent
+    /* The method's option specs, set by rp_solver_create (a caller of a
+     * type's init must set them as it does): an option absent
      * from keys takes its spec's `fallback` in rp_options_double and
      * rp_options_uint, so a default is written once, in the spec that
      * --help shows.  NULL: no fallbacks. */

@@ -88,7 +88,8 @@ static rp_status hrun_start(hrun *r, const rp_solver_type *type, const rp_scene 
         vals[n] = kv[2 * n + 1];
     }
     rp_options o = {.size = sizeof o, .want = want, .seed = 7, .threads = threads,
-                    .keys = keys, .values = vals, .count = n, .log = capture_log};
+                    .keys = keys, .values = vals, .count = n, .log = capture_log,
+                    .specs = type->options}; /* as rp_solver_create hands them to init */
     r->type = type;
     r->state = calloc(1, type->state_size);
     cr_assert(r->state);

@@ -99,6 +99,7 @@ static rp_status rad_open(rad_run *r, const rp_solver_type *t, const rp_scene *s
     r->state = calloc(1, t->state_size);
     cr_assert(r->state);
     r->sys = r->state;
+    r->o.specs = t->options; /* as rp_solver_create hands them to init */
     st = t->init(r->state, sc, &r->o, err);
     if (st != RP_OK) {
         t->fini(r->state);
