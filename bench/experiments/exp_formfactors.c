@@ -139,6 +139,32 @@ static rp_status ff_measure(const ff_setup *s, const rp_ff_params *base, unsigne
     return st;
 }
 
+/* ff_measure for one row of the tables, recorded in the study's journal
+ * as it finishes and read back on --resume (timings as first measured). */
+static rp_status ff_unit(const rp_experiment_params *p, const ff_setup *s, const rp_ff_params *prm, unsigned nseeds,
+                         double *F, double *rel_rms, double *seconds, rp_error *err)
+{
+    char key[200];
+    snprintf(key, sizeof key, "formfactors %s exact %.17g %s tolerance %.17g samples %u resolution %u seeds %u",
+             s->name, s->exact, rp_ff_method_name(prm->method), prm->tolerance, (unsigned)prm->samples,
+             (unsigned)prm->resolution, nseeds);
+    double rec[3];
+    if (rp_journal_get_doubles(p->journal, key, rec, 3)) {
+        *F = rec[0];
+        *rel_rms = rec[1];
+        *seconds = rec[2];
+        return RP_OK;
+    }
+    if (rp_cancelled(p->cancel))
+        return rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+    rp_status st = ff_measure(s, prm, nseeds, F, rel_rms, seconds, err);
+    if (st == RP_OK) {
+        double v[3] = {*F, *rel_rms, *seconds};
+        st = rp_journal_put_doubles(p->journal, key, v, 3, err);
+    }
+    return st;
+}
+
 rp_status rp_exp_formfactors(const rp_experiment_params *p, rp_error *err)
 {
     const int quick = p->quick;
@@ -191,7 +217,7 @@ rp_status rp_exp_formfactors(const rp_experiment_params *p, rp_error *err)
                     param = prm.resolution = res_full[k];
                 double F, e, secs;
                 unsigned ns = mi == 1 ? mc_seeds : 1;
-                if ((st = ff_measure(&su, &prm, ns, &F, &e, &secs, err)) != RP_OK)
+                if ((st = ff_unit(p, &su, &prm, ns, &F, &e, &secs, err)) != RP_OK)
                     break;
                 fprintf(csv.f, "cost,%s,%g,%s,%s=%g,%g,%.10f,%.10f,%.4g,%.4g,%u\n",
                         cfg == 0 ? "parallel" : "perpendicular", configs[cfg], rp_ff_method_name(methods[mi]),
@@ -213,7 +239,7 @@ rp_status rp_exp_formfactors(const rp_experiment_params *p, rp_error *err)
             rp_ff_params prm = {.size = sizeof prm, .method = methods[mi]};
             double F, e, secs;
             unsigned ns = mi == 1 ? mc_seeds : 1;
-            st = ff_measure(&su, &prm, ns, &F, &e, &secs, err);
+            st = ff_unit(p, &su, &prm, ns, &F, &e, &secs, err);
             if (st == RP_OK) {
                 fprintf(csv.f, "distance,parallel,%g,%s,default,,%.10f,%.10f,%.4g,%.4g,%u\n", dist[d],
                         rp_ff_method_name(methods[mi]), su.exact, F, e, secs, ns);

@@ -38,6 +38,21 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
     double leaves[5], links[5], seconds[5];
     rp_status st = RP_OK;
     for (size_t k = 0; k < n && st == RP_OK; k++) {
+        /* a row finished before an interruption is read back from the
+         * study's journal, not run again */
+        char key[96];
+        snprintf(key, sizeof key, "hierarchy links bf-epsilon %.17g", bf[k]);
+        double rec[3];
+        if (rp_journal_get_doubles(p->journal, key, rec, 3)) {
+            leaves[k] = rec[0];
+            links[k] = rec[1];
+            seconds[k] = rec[2];
+            continue;
+        }
+        if (rp_cancelled(p->cancel)) {
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+            break;
+        }
         char eps[32], area[32];
         snprintf(eps, sizeof eps, "%g", bf[k]);
         snprintf(area, sizeof area, "%g", bf[k] * 1e-4);
@@ -62,6 +77,8 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
             leaves[k] = (double)hs.leaves;
             links[k] = (double)hs.links;
             seconds[k] = tot.wall_s;
+            double v[3] = {leaves[k], links[k], seconds[k]};
+            st = rp_journal_put_doubles(p->journal, key, v, 3, err);
             if (p->log) {
                 char line[160];
                 snprintf(line, sizeof line, "  hierarchical bf-epsilon %g: %zu leaves, %zu links, %.2f s", bf[k],
@@ -187,10 +204,31 @@ static rp_status hierarchy_form_factors(const rp_experiment_params *p, const rp_
     size_t n = p->quick ? 2 : 5;
     const char *elements = p->quick ? "1200" : "4800";
     ffrow rows[6];
-    rp_status st = hierarchy_solve(scene, ref, gs, "elements", elements, p->threads, p->cancel, &rows[0], err);
-    for (size_t k = 0; k < n && st == RP_OK; k++)
-        st = hierarchy_solve(scene, ref, &rp_solver_hierarchical, "bf-epsilon", bf[k], p->threads, p->cancel, &rows[k + 1],
-                             err);
+    rp_status st = RP_OK;
+    for (size_t k = 0; k <= n && st == RP_OK; k++) {
+        const rp_solver_type *t = k ? &rp_solver_hierarchical : gs;
+        const char *key = k ? "bf-epsilon" : "elements", *value = k ? bf[k - 1] : elements;
+        /* a row finished before an interruption is read back from the
+         * study's journal, not run again */
+        char jkey[96];
+        snprintf(jkey, sizeof jkey, "hierarchy form factors %s %s=%s", t->name, key, value);
+        double rec[3];
+        if (rp_journal_get_doubles(p->journal, jkey, rec, 3)) {
+            rows[k].form_factors = rec[0];
+            rows[k].error = rec[1];
+            rows[k].seconds = rec[2];
+            snprintf(rows[k].spec, sizeof rows[k].spec, "%.20s:%.20s=%.20s", t->name, key, value);
+            continue;
+        }
+        if (rp_cancelled(p->cancel))
+            st = rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+        if (st == RP_OK)
+            st = hierarchy_solve(scene, ref, t, key, value, p->threads, p->cancel, &rows[k], err);
+        if (st == RP_OK) {
+            double v[3] = {rows[k].form_factors, rows[k].error, rows[k].seconds};
+            st = rp_journal_put_doubles(p->journal, jkey, v, 3, err);
+        }
+    }
     if (st != RP_OK)
         return st;
     if (p->log)
