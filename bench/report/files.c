@@ -2,7 +2,10 @@
 #include "bench/report/files.h"
 
 #include <errno.h>
+#include <fcntl.h>
+#include <stdatomic.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -39,14 +42,79 @@ const char *rp_path_join(char *buf, size_t n, const char *dir, const char *name)
     return buf;
 }
 
+/* Opens a fresh PATH.tmp.PID.N for writing; the name goes to *tmp_out
+ * (malloc'd).  Mode 0666 lets the umask decide the final permissions, as
+ * for any ordinary file the program creates. */
+rp_status rp_temp_open(const char *path, int *fd_out, char **tmp_out, rp_error *err)
+{
+    static atomic_uint counter;
+    size_t n = strlen(path) + 64;
+    char *tmp = malloc(n);
+    if (!tmp)
+        return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
+    for (int attempt = 0; attempt < 1000; attempt++) {
+        unsigned k = atomic_fetch_add(&counter, 1u);
+        snprintf(tmp, n, "%s.tmp.%ld.%u", path, (long)getpid(), k);
+        int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+        if (fd >= 0) {
+            *fd_out = fd;
+            *tmp_out = tmp;
+            return RP_OK;
+        }
+        if (errno != EEXIST)
+            break;
+    }
+    int e = errno;
+    free(tmp);
+    return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot create a temporary file: %s", path,
+                        strerror(e));
+}
+
+/* Flushes fd to disk, closes it and renames tmp to path; on failure removes
+ * tmp.  Always frees tmp. */
+rp_status rp_temp_commit(int fd, char *tmp, const char *path, rp_error *err)
+{
+    rp_status st = RP_OK;
+    if (fsync(fd) != 0)
+        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot flush: %s", path, strerror(errno));
+    if (close(fd) != 0 && st == RP_OK)
+        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot close: %s", path, strerror(errno));
+    if (st == RP_OK && rename(tmp, path) != 0)
+        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot rename the temporary file into place: %s",
+                          path, strerror(errno));
+    if (st != RP_OK)
+        unlink(tmp);
+    free(tmp);
+    return st;
+}
+
+/* Gives up on a temporary file. */
+void rp_temp_discard(int fd, char *tmp)
+{
+    if (fd >= 0)
+        close(fd);
+    if (tmp)
+        unlink(tmp);
+    free(tmp);
+}
+
 rp_status rp_out_open(rp_out *o, const char *path, rp_error *err)
 {
     memset(o, 0, sizeof *o);
     snprintf(o->path, sizeof o->path, "%s", path);
-    snprintf(o->tmp, sizeof o->tmp, "%s.tmp.%ld", path, (long)getpid());
-    o->f = fopen(o->tmp, "w");
-    if (!o->f)
+    int fd = -1;
+    char *tmp = NULL;
+    rp_status st = rp_temp_open(path, &fd, &tmp, err);
+    if (st != RP_OK)
+        return st;
+    snprintf(o->tmp, sizeof o->tmp, "%s", tmp);
+    free(tmp);
+    o->f = fdopen(fd, "w");
+    if (!o->f) {
+        close(fd);
+        unlink(o->tmp);
         return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot write: %s", o->tmp, strerror(errno));
+    }
     return RP_OK;
 }
 
@@ -54,19 +122,16 @@ rp_status rp_out_close(rp_out *o, int ok, rp_error *err)
 {
     if (!o->f)
         return RP_OK;
-    int bad = ferror(o->f);
+    int bad = fflush(o->f) != 0 || ferror(o->f);
+    int fd = dup(fileno(o->f));
     bad |= fclose(o->f) != 0;
     o->f = NULL;
-    if (!ok || bad) {
-        unlink(o->tmp);
+    char *tmp = strdup(o->tmp);
+    if (!ok || bad || fd < 0 || !tmp) {
+        rp_temp_discard(fd, tmp);
         return ok ? rp_error_set(err, RP_ERR_RUNTIME, "%s: write failed", o->path) : RP_OK;
     }
-    if (rename(o->tmp, o->path) != 0) {
-        unlink(o->tmp);
-        return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot rename the temporary file into place: %s", o->path,
-                            strerror(errno));
-    }
-    return RP_OK;
+    return rp_temp_commit(fd, tmp, o->path, err);
 }
 
 void rp_json_string(FILE *f, const char *s)

@@ -11,9 +11,17 @@
 /* mkdir -p. */
 rp_status rp_mkdirs(const char *path, rp_error *err);
 
-/* A text file written atomically: rp_out_open makes PATH.tmp.PID, and
- * rp_out_close renames it over PATH (or removes it when ok is 0 or a write
- * failed). */
+/* The one atomic file writer of radpt: a fresh PATH.tmp.PID.N (O_EXCL),
+ * written, flushed to disk (fsync), closed and renamed over PATH; any
+ * failure removes the temporary file, so PATH is either the old file or
+ * the whole new one.  rp_temp_commit and rp_temp_discard free tmp. */
+rp_status rp_temp_open(const char *path, int *fd, char **tmp, rp_error *err);
+rp_status rp_temp_commit(int fd, char *tmp, const char *path, rp_error *err);
+void rp_temp_discard(int fd, char *tmp);
+
+/* A text file through that writer: rp_out_open opens the temporary file as
+ * a stream, and rp_out_close commits it (or removes it when ok is 0 or a
+ * write failed). */
 typedef struct rp_out {
     FILE *f;
     char path[1024];

@@ -8,6 +8,8 @@
  * it was. */
 #include "bench/report/image.h"
 
+#include "bench/report/files.h"
+
 #include <OpenEXR/openexr.h>
 #include <png.h>
 
@@ -23,64 +25,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-/* ---------------------------------------------------------------------
- * Temporary files */
-
-/* Opens a fresh PATH.tmp.PID.N for writing; the name goes to *tmp_out
- * (malloc'd).  Mode 0666 lets the umask decide the final permissions, as
- * for any ordinary file the program creates. */
-static rp_status temp_open(const char *path, int *fd_out, char **tmp_out, rp_error *err)
-{
-    static atomic_uint counter;
-    size_t n = strlen(path) + 64;
-    char *tmp = malloc(n);
-    if (!tmp)
-        return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
-    for (int attempt = 0; attempt < 1000; attempt++) {
-        unsigned k = atomic_fetch_add(&counter, 1u);
-        snprintf(tmp, n, "%s.tmp.%ld.%u", path, (long)getpid(), k);
-        int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-        if (fd >= 0) {
-            *fd_out = fd;
-            *tmp_out = tmp;
-            return RP_OK;
-        }
-        if (errno != EEXIST)
-            break;
-    }
-    int e = errno;
-    free(tmp);
-    return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot create a temporary file: %s", path,
-                        strerror(e));
-}
-
-/* Flushes fd to disk, closes it and renames tmp to path; on failure removes
- * tmp.  Always frees tmp. */
-static rp_status temp_commit(int fd, char *tmp, const char *path, rp_error *err)
-{
-    rp_status st = RP_OK;
-    if (fsync(fd) != 0)
-        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot flush: %s", path, strerror(errno));
-    if (close(fd) != 0 && st == RP_OK)
-        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot close: %s", path, strerror(errno));
-    if (st == RP_OK && rename(tmp, path) != 0)
-        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot rename the temporary file into place: %s",
-                          path, strerror(errno));
-    if (st != RP_OK)
-        unlink(tmp);
-    free(tmp);
-    return st;
-}
-
-/* Gives up on a temporary file. */
-static void temp_discard(int fd, char *tmp)
-{
-    if (fd >= 0)
-        close(fd);
-    if (tmp)
-        unlink(tmp);
-    free(tmp);
-}
 
 /* ---------------------------------------------------------------------
  * OpenEXRCore glue */
@@ -313,7 +257,7 @@ rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *er
 
     int fd = -1;
     char *tmp = NULL;
-    if ((st = temp_open(path, &fd, &tmp, err)) != RP_OK)
+    if ((st = rp_temp_open(path, &fd, &tmp, err)) != RP_OK)
         return st;
 
     exr_capture cap = {{0}};
@@ -342,11 +286,11 @@ rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *er
     exr_current_capture = saved;
 
     if (rv != EXR_ERR_SUCCESS) {
-        temp_discard(fd, tmp);
+        rp_temp_discard(fd, tmp);
         return rp_error_set(err, RP_ERR_RUNTIME, "%s: OpenEXR %s failed: %s", path, what,
                             exr_message(&cap, rv));
     }
-    return temp_commit(fd, tmp, path, err);
+    return rp_temp_commit(fd, tmp, path, err);
 }
 
 /* Decodes every channel of part 0 into the planes (width * height floats
@@ -750,7 +694,7 @@ rp_status rp_image_write_pfm(const char *path, uint32_t width, uint32_t height, 
         return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory", path);
     int fd;
     char *tmp;
-    rp_status st = temp_open(path, &fd, &tmp, err);
+    rp_status st = rp_temp_open(path, &fd, &tmp, err);
     if (st != RP_OK) {
         free(line);
         return st;
@@ -780,10 +724,10 @@ rp_status rp_image_write_pfm(const char *path, uint32_t width, uint32_t height, 
     free(line);
     if (!ok) {
         int e = errno;
-        temp_discard(fd, tmp);
+        rp_temp_discard(fd, tmp);
         return rp_error_set(err, RP_ERR_RUNTIME, "%s: write failed: %s", path, strerror(e));
     }
-    return temp_commit(fd, tmp, path, err);
+    return rp_temp_commit(fd, tmp, path, err);
 }
 
 rp_image_format rp_image_format_of(const char *path)
@@ -833,7 +777,7 @@ rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
 
     int fd = -1;
     char *tmp = NULL;
-    rp_status st = temp_open(path, &fd, &tmp, err);
+    rp_status st = rp_temp_open(path, &fd, &tmp, err);
     if (st != RP_OK) {
         free(row);
         return st;
@@ -846,7 +790,7 @@ rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
         if (fd2 >= 0)
             close(fd2);
         free(row);
-        temp_discard(fd, tmp);
+        rp_temp_discard(fd, tmp);
         return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot open stream: %s", path, strerror(e));
     }
 
@@ -871,8 +815,8 @@ rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
         snprintf(cap.message, sizeof cap.message, "%s", strerror(errno));
     }
     if (rc != 0) {
-        temp_discard(fd, tmp);
+        rp_temp_discard(fd, tmp);
         return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot write PNG: %s", path, cap.message);
     }
-    return temp_commit(fd, tmp, path, err);
+    return rp_temp_commit(fd, tmp, path, err);
 }
