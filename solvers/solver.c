@@ -103,6 +103,17 @@ static const char *numeric_fallback(const rp_options *o, const char *name)
     return NULL;
 }
 
+const char *rp_options_word(const rp_options *o, const char *name)
+{
+    const char *v = rp_options_get(o, name);
+    if (v || !o || o->size < offsetof(rp_options, specs) + sizeof o->specs || !o->specs)
+        return v;
+    for (const rp_option_spec *sp = o->specs; sp->name; sp++)
+        if (strcmp(sp->name, name) == 0)
+            return sp->fallback;
+    return NULL;
+}
+
 rp_status rp_options_double(const rp_options *o, const char *name, double lo, double hi,
                             double *out, rp_error *err)
 {

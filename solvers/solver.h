@@ -177,6 +177,10 @@ int rp_solver_get_f64(FILE *f, double *v, size_t n);
 
 /* Option look-up for methods: the value given for name, or NULL. */
 const char *rp_options_get(const rp_options *o, const char *name);
+/* A word option's value as given, else its spec's fallback (when the
+ * options carry the specs), else NULL. */
+const char *rp_options_word(const rp_options *o, const char *name);
+
 /* Parses a numeric option into *out; absent, its spec's fallback (when the
  * options carry the specs and the fallback is a number), else *out is left
  * alone.  A malformed or out-of-range value is RP_ERR_INPUT with a message

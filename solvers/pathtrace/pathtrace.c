@@ -180,12 +180,10 @@ static rp_status pt_camera(pt_state *s, const rp_camera *cam, rp_error *err)
 static rp_status pt_parse_options(pt_state *s, const rp_options *o, rp_sampler_kind *kind, rp_error *err)
 {
     rp_status st;
-    s->spp = 16;
-    s->samples = 4096;
-    s->batch = 1024;
+    /* defaults: the option specs' fallbacks (rp_options_uint and
+     * rp_options_word read them) */
     s->max_depth = PT_UNLIMITED;
     unsigned long rr = PT_RR_DEPTH;
-    *kind = RP_SAMPLER_SOBOL;
     if ((st = rp_options_uint(o, "spp", 1, UINT32_MAX, &s->spp, err)) != RP_OK)
         return st;
     if ((st = rp_options_uint(o, "samples", 1, UINT32_MAX, &s->samples, err)) != RP_OK)
@@ -202,7 +200,7 @@ static rp_status pt_parse_options(pt_state *s, const rp_options *o, rp_sampler_k
                      ? o->open_ended : 0;
     s->spp_rule = !open_ended || rp_options_get(o, "spp");
     s->samples_rule = !open_ended || rp_options_get(o, "samples");
-    const char *v = rp_options_get(o, "sampler");
+    const char *v = rp_options_word(o, "sampler"); /* default: the spec's */
     if (v && (st = rp_sampler_parse(v, kind, err)) != RP_OK)
         return st;
     v = rp_options_get(o, "max-depth");

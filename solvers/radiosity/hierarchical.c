@@ -281,7 +281,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         return st;
     s->cluster_rays = (unsigned)crays;
     s->cluster_face_rays = (unsigned)cfrays;
-    const char *cm = rp_options_get(o, "cluster");
+    const char *cm = rp_options_word(o, "cluster"); /* defaults: the specs' */
     if (!cm || strcmp(cm, "auto") == 0)
         s->clustering = s->nfaces > HIER_CLUSTER_AUTO_FACES;
     else if (strcmp(cm, "on") == 0)
@@ -300,8 +300,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->gather_rays = (unsigned)gr;
     s->vertex_rays = (unsigned)vr;
     s->contact_levels = (unsigned)cl;
-    s->recon = HIER_RECON_GOURAUD;
-    const char *rm = rp_options_get(o, "reconstruct");
+    const char *rm = rp_options_word(o, "reconstruct");
     if (rm) {
         if (strcmp(rm, "flat") == 0)
             s->recon = HIER_RECON_FLAT;

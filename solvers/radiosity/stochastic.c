@@ -208,17 +208,16 @@ static rp_status sj_parse(sj_state *s, const rp_options *o, rp_mesh_params *mp, 
                             "give --iterations");
 
     rp_sampler_kind kind = RP_SAMPLER_RANDOM;
-    if ((v = rp_options_get(o, "sampler")) && (st = rp_sampler_parse(v, &kind, err)) != RP_OK)
+    if ((v = rp_options_word(o, "sampler")) && (st = rp_sampler_parse(v, &kind, err)) != RP_OK)
         return st;
     /* Stratified: one grid of strata per replica and iteration. */
     rp_sampler_init(&s->sampler, kind, o ? o->seed : 0, s->M);
 
-    s->recon.mode = RP_RECON_FLAT;
     s->recon.spp = 16;
     s->recon.gather_rays = 16;
     s->recon.seed = o ? o->seed : 0;
     s->recon.threads = s->threads;
-    if ((v = rp_options_get(o, "reconstruct")) && (st = rp_recon_mode_parse(v, &s->recon.mode, err)) != RP_OK)
+    if ((v = rp_options_word(o, "reconstruct")) && (st = rp_recon_mode_parse(v, &s->recon.mode, err)) != RP_OK)
         return st;
     unsigned long u = s->recon.spp;
     if ((st = rp_options_uint(o, "spp", 1, 1u << 20, &u, err)) != RP_OK)

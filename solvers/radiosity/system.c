@@ -90,7 +90,7 @@ static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, c
     s->ffp.visibility_rays = 0;
     s->ffp.seed = o ? o->seed : 0;
     s->ffp.cancel = s->cancel;
-    const char *v = rp_options_get(o, "ff");
+    const char *v = rp_options_word(o, "ff"); /* defaults: the specs' */
     if (v && (st = rp_ff_method_parse(v, &s->ffp.method, err)) != RP_OK)
         return st;
     unsigned long u = s->ffp.samples;
@@ -134,11 +134,10 @@ static rp_status rad_parse_options(rp_rad_system *s, const rp_rad_config *cfg, c
         return rp_error_set(err, RP_ERR_INPUT, "%s: --reciprocity needs pairwise form factors "
                             "(--ff analytic or montecarlo); the hemicube gives whole rows", name);
 
-    s->recon.mode = RP_RECON_FLAT;
     s->recon.spp = 16;
     s->recon.gather_rays = 16;
     s->recon.seed = o ? o->seed : 0;
-    if ((v = rp_options_get(o, "reconstruct")) && (st = rp_recon_mode_parse(v, &s->recon.mode, err)) != RP_OK)
+    if ((v = rp_options_word(o, "reconstruct")) && (st = rp_recon_mode_parse(v, &s->recon.mode, err)) != RP_OK)
         return st;
     u = s->recon.spp;
     if ((st = rp_options_uint(o, "spp", 1, 1u << 20, &u, err)) != RP_OK)
