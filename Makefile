@@ -12,7 +12,7 @@
 
 DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
                 libembree-dev libcgal-dev libcgal-demo libgmp-dev libmpfr-dev libcriterion-dev \
-                libpng-dev gnuplot-nox
+                libpng-dev gnuplot-nox openmpi-bin libopenmpi-dev
 
 VERSION := 0.15.0
 GIT_DESCRIBE := $(shell git describe --always --dirty 2>/dev/null || echo unknown)
@@ -24,13 +24,17 @@ BUILD ?= build
 GSL_CFLAGS := $(shell pkg-config --cflags gsl 2>/dev/null)
 GSL_LIBS   := $(shell pkg-config --libs gsl 2>/dev/null || echo -lgsl -lgslcblas)
 
+# Open MPI: only bench/run/mpi.c includes mpi.h; a plain run makes no MPI call.
+MPI_CFLAGS := $(shell pkg-config --cflags ompi-c 2>/dev/null)
+MPI_LIBS   := $(shell pkg-config --libs ompi-c 2>/dev/null || echo -lmpi)
+
 OPT      ?= -O2
 SANITIZE ?=
 CPPFLAGS := -I. $(GSL_CFLAGS) -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
 CFLAGS   := -std=c11 $(OPT) -g -Wall -Wextra -Werror -fopenmp -MMD -MP $(SANITIZE)
 # CGAL is heavy to compile: no -g, one or two translation units.
 CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(SANITIZE)
-LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng $(GSL_LIBS) \
+LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng $(GSL_LIBS) $(MPI_LIBS) \
             -lgmp -lmpfr -lstdc++ -lm
 LDFLAGS  := -fopenmp $(SANITIZE)
 
@@ -76,6 +80,7 @@ $(BUILD)/%.o: %.cpp
 $(BUILD)/tests/run: $(TEST_OBJ) $(BUILD)/libradpt.a
 	$(CC) $(LDFLAGS) -o $@ $^ -lcriterion $(LDLIBS)
 
+$(BUILD)/bench/run/mpi.o: CPPFLAGS += $(MPI_CFLAGS)
 $(BUILD)/bench/cli/main.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"' -DRP_GIT_DESCRIBE='"$(GIT_DESCRIBE)"'
 $(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"'
 

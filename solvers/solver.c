@@ -14,6 +14,7 @@
 struct rp_solver {
     const rp_solver_type *type;
     void *state;
+    const rp_comm *comm;
 };
 
 rp_status rp_solver_create(const rp_solver_type *type, const rp_scene *scene,
@@ -38,6 +39,9 @@ rp_status rp_solver_create(const rp_solver_type *type, const rp_scene *scene,
         memcpy(&with, options, options->size < sizeof with ? options->size : sizeof with);
     with.size = sizeof with;
     with.specs = type->options;
+    if (!type->distributed || rp_comm_size(with.comm) <= 1)
+        with.comm = NULL;
+    s->comm = with.comm;
     st = type->init(s->state, scene, &with, err);
     if (st != RP_OK) {
         /* init cleans up after itself on failure; fini must accept the
@@ -68,6 +72,8 @@ rp_status rp_solver_estimate(const rp_solver *s, rp_estimate *estimate, rp_error
 const rp_solver_type *rp_solver_type_of(const rp_solver *s) { return s->type; }
 
 const void *rp_solver_state(const rp_solver *s) { return s->state; }
+
+const rp_comm *rp_solver_comm(const rp_solver *s) { return s->comm; }
 
 void rp_solver_destroy(rp_solver *s)
 {

@@ -15,6 +15,7 @@
 
 #include "../geometry/scene.h"
 #include "../geometry/status.h"
+#include "comm.h"
 
 /* What the harness wants answered. */
 enum {
@@ -60,6 +61,10 @@ typedef struct rp_options {
      * rp_options_uint, so a default is written once, in the spec that
      * --help shows.  NULL: no fallbacks. */
     const rp_option_spec *specs;
+    /* The ranks to split the work over (solvers/comm.h), or NULL: alone.
+     * rp_solver_create hands it on only to a type that declares
+     * `distributed`; the others see NULL. */
+    const rp_comm *comm;
 } rp_options;
 
 /* 1 once cancellation has been asked for (cancel may be NULL). */
@@ -134,6 +139,11 @@ typedef struct rp_solver_type {
     int monte_carlo;
     const char *samples_name;
     int surfaces_cost;
+    /* distributed: given rp_options.comm, the method splits its work over
+     * the ranks by global index and every rank's step, estimate and save
+     * are collective, with answers identical for any rank count (see
+     * comm.h).  Types without it run on one rank. */
+    int distributed;
 } rp_solver_type;
 
 /* What one sample of the type counts, plural ("samples per pixel"). */
@@ -151,6 +161,9 @@ rp_status rp_solver_create(const rp_solver_type *type, const rp_scene *scene,
 rp_status rp_solver_step(rp_solver *s, rp_step_info *info, rp_error *err);
 rp_status rp_solver_estimate(const rp_solver *s, rp_estimate *estimate, rp_error *err);
 const rp_solver_type *rp_solver_type_of(const rp_solver *s);
+
+/* The communicator the solver splits its work over, NULL when alone. */
+const rp_comm *rp_solver_comm(const rp_solver *s);
 /* The method's state, for method-specific queries such as
  * rp_hierarchical_stats (solvers/radiosity/hierarchical.h). */
 const void *rp_solver_state(const rp_solver *s);

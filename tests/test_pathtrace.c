@@ -66,7 +66,7 @@ static rp_status try_create(const rp_scene *sc, unsigned want, uint64_t seed, in
     va_start(ap, err);
     opts_from(&kv, ap);
     va_end(ap);
-    rp_options o = {sizeof o, want, seed, threads, kv.keys, kv.values, kv.n, 0, NULL, NULL, NULL, NULL};
+    rp_options o = {sizeof o, want, seed, threads, kv.keys, kv.values, kv.n, 0, NULL, NULL, NULL, NULL, NULL};
     return rp_solver_create(rp_solver_lookup("pathtrace"), sc, &o, out, err);
 }
 
@@ -75,7 +75,7 @@ static rp_solver *vcreate(const rp_scene *sc, unsigned want, uint64_t seed, int 
 {
     opts kv;
     opts_from(&kv, ap);
-    rp_options o = {sizeof o, want, seed, threads, kv.keys, kv.values, kv.n, open_ended, NULL, NULL, NULL, NULL};
+    rp_options o = {sizeof o, want, seed, threads, kv.keys, kv.values, kv.n, open_ended, NULL, NULL, NULL, NULL, NULL};
     rp_solver *s = NULL;
     rp_error err = {""};
     cr_assert_eq(rp_solver_create(rp_solver_lookup("pathtrace"), sc, &o, &s, &err), RP_OK, "%s",
@@ -749,7 +749,7 @@ Test(pathtrace, progressive_counts_and_open_ended)
     }
     rp_solver_destroy(s);
     /* Under an open-ended budget the default spp does not stop the run... */
-    rp_options o = {sizeof o, RP_WANT_IMAGE, 1, 0, NULL, NULL, 0, 1, NULL, NULL, NULL, NULL};
+    rp_options o = {sizeof o, RP_WANT_IMAGE, 1, 0, NULL, NULL, 0, 1, NULL, NULL, NULL, NULL, NULL};
     cr_assert_eq(rp_solver_create(rp_solver_lookup("pathtrace"), sc, &o, &s, &err), RP_OK);
     for (int k = 0; k < 20; k++) {
         rp_step_info info;
@@ -766,7 +766,7 @@ Test(pathtrace, progressive_counts_and_open_ended)
     rp_solver_destroy(s);
     /* ...but an explicit one does. */
     const char *k[] = {"spp"}, *v[] = {"2"};
-    rp_options o2 = {sizeof o2, RP_WANT_IMAGE, 1, 0, k, v, 1, 1, NULL, NULL, NULL, NULL};
+    rp_options o2 = {sizeof o2, RP_WANT_IMAGE, 1, 0, k, v, 1, 1, NULL, NULL, NULL, NULL, NULL};
     cr_assert_eq(rp_solver_create(rp_solver_lookup("pathtrace"), sc, &o2, &s, &err), RP_OK);
     rp_step_info info;
     cr_assert_eq(rp_solver_step(s, &info, &err), RP_OK);

@@ -17,6 +17,7 @@
 #include "bench/cli/commands.h"
 #include "bench/report/image.h"
 #include "bench/run/driver.h"
+#include "bench/run/mpi.h"
 #include "bench/run/resume.h"
 #include "bench/report/spectrum.h"
 
@@ -133,6 +134,16 @@ static void fill_options(rp_options *o, const rp_cli *cli, unsigned want)
     o->open_ended = cli->time_budget > 0;
     o->log = stderr_log;
     o->cancel = &interrupted;
+    o->comm = rp_mpi_world(); /* used by methods that split their work */
+}
+
+/* Under mpirun, a method that does not split its work runs on rank 0
+ * alone: the other ranks stop here (after loading the scene, so that bad
+ * input fails alike everywhere) and wait in rp_mpi_finish. */
+static int idle_rank(const char *method)
+{
+    const rp_solver_type *t = rp_solver_lookup(method);
+    return rp_mpi_rank() != 0 && t && !t->distributed;
 }
 
 /* Whether the run met its method's tolerance: known for methods that
@@ -320,6 +331,8 @@ int rp_cmd_render(int argc, char **argv)
         st = rp_error_set(&err, RP_ERR_INPUT, "%s: the scene has no camera to render from", cli.scene);
         goto done;
     }
+    if (idle_rank(cli.method))
+        goto done;
     rp_options opts;
     fill_options(&opts, &cli, RP_WANT_IMAGE);
     st = rp_solver_create(rp_solver_lookup(cli.method), scene, &opts, &solver, &err);
@@ -473,7 +486,7 @@ int rp_cmd_probe(int argc, char **argv)
     double *mean = NULL, *se = NULL;
     rp_cli_catch_signals(on_signal);
     rp_status st = rp_load_scene(cli.scene, cli.camera, 0, &scene, &err);
-    if (st != RP_OK)
+    if (st != RP_OK || idle_rank(cli.method))
         goto done;
     rp_options opts;
     fill_options(&opts, &cli, RP_WANT_SURFACES);

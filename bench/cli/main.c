@@ -6,6 +6,7 @@
 #include "solvers/solver.h"
 #include "bench/cli/commands.h"
 #include "bench/experiments/experiments.h"
+#include "bench/run/mpi.h"
 
 #ifndef RP_VERSION
 #define RP_VERSION "unknown"
@@ -130,9 +131,8 @@ static int print_method(const char *name)
     return 0;
 }
 
-int main(int argc, char **argv)
+static int dispatch(int argc, char **argv)
 {
-    gsl_set_error_handler_off();
     if (argc < 2) {
         fprintf(stderr, "radpt: no command; usage: radpt info|render|probe|reference|bench|experiment|"
                         "formfactor|throughput|samplers|compare|help|--version ... (see radpt help)\n");
@@ -182,4 +182,13 @@ int main(int argc, char **argv)
         return rp_cmd_compare(argc, argv);
     fprintf(stderr, "radpt: unknown command '%s' (see radpt help)\n", cmd);
     return 2;
+}
+
+int main(int argc, char **argv)
+{
+    gsl_set_error_handler_off();
+    /* Under mpirun every rank runs the same command; plainly, no MPI. */
+    if (rp_mpi_start(&argc, &argv) != 0)
+        return 1;
+    return rp_mpi_finish(dispatch(argc, argv));
 }

@@ -10,8 +10,20 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+/* Set on MPI ranks other than 0 (bench/run/mpi.c): rank 0 owns the files.
+ * Writers run as usual (a checkpoint's save is collective) but write to
+ * /dev/null, and no directory is made. */
+static int discarding;
+
+void rp_files_discard(int on)
+{
+    discarding = on;
+}
+
 rp_status rp_mkdirs(const char *path, rp_error *err)
 {
+    if (discarding)
+        return RP_OK;
     char buf[1024];
     size_t n = strlen(path);
     if (n == 0 || n >= sizeof buf)
@@ -48,6 +60,14 @@ const char *rp_path_join(char *buf, size_t n, const char *dir, const char *name)
 rp_status rp_temp_open(const char *path, int *fd_out, char **tmp_out, rp_error *err)
 {
     static atomic_uint counter;
+    if (discarding) {
+        int fd = open("/dev/null", O_WRONLY | O_CLOEXEC);
+        if (fd < 0)
+            return rp_error_set(err, RP_ERR_RUNTIME, "/dev/null: %s", strerror(errno));
+        *fd_out = fd;
+        *tmp_out = NULL;
+        return RP_OK;
+    }
     size_t n = strlen(path) + 64;
     char *tmp = malloc(n);
     if (!tmp)
@@ -75,6 +95,10 @@ rp_status rp_temp_open(const char *path, int *fd_out, char **tmp_out, rp_error *
 rp_status rp_temp_commit(int fd, char *tmp, const char *path, rp_error *err)
 {
     rp_status st = RP_OK;
+    if (!tmp) { /* discarding (rp_files_discard) */
+        close(fd);
+        return RP_OK;
+    }
     if (fsync(fd) != 0)
         st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot flush: %s", path, strerror(errno));
     if (close(fd) != 0 && st == RP_OK)
@@ -107,12 +131,13 @@ rp_status rp_out_open(rp_out *o, const char *path, rp_error *err)
     rp_status st = rp_temp_open(path, &fd, &tmp, err);
     if (st != RP_OK)
         return st;
-    snprintf(o->tmp, sizeof o->tmp, "%s", tmp);
+    snprintf(o->tmp, sizeof o->tmp, "%s", tmp ? tmp : ""); /* "": discarding */
     free(tmp);
     o->f = fdopen(fd, "w");
     if (!o->f) {
         close(fd);
-        unlink(o->tmp);
+        if (o->tmp[0])
+            unlink(o->tmp);
         return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot write: %s", o->tmp, strerror(errno));
     }
     return RP_OK;
@@ -126,8 +151,8 @@ rp_status rp_out_close(rp_out *o, int ok, rp_error *err)
     int fd = dup(fileno(o->f));
     bad |= fclose(o->f) != 0;
     o->f = NULL;
-    char *tmp = strdup(o->tmp);
-    if (!ok || bad || fd < 0 || !tmp) {
+    char *tmp = o->tmp[0] ? strdup(o->tmp) : NULL;
+    if (!ok || bad || fd < 0 || (o->tmp[0] && !tmp)) {
         rp_temp_discard(fd, tmp);
         return ok ? rp_error_set(err, RP_ERR_RUNTIME, "%s: write failed", o->path) : RP_OK;
     }

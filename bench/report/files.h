@@ -11,6 +11,10 @@
 /* mkdir -p. */
 rp_status rp_mkdirs(const char *path, rp_error *err);
 
+/* on: every file written through rp_temp_open and rp_out goes to /dev/null
+ * and rp_mkdirs makes nothing (MPI ranks other than 0, bench/run/mpi.h). */
+void rp_files_discard(int on);
+
 /* The one atomic file writer of radpt: a fresh PATH.tmp.PID.N (O_EXCL),
  * written, flushed to disk (fsync), closed and renamed over PATH; any
  * failure removes the temporary file, so PATH is either the old file or

@@ -272,7 +272,9 @@ rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *er
 
     exr_context_t ctx = NULL;
     const char *what = "start writing";
-    exr_result_t rv = exr_start_write(&ctx, tmp, EXR_WRITE_FILE_DIRECTLY, &init);
+    /* the name is for messages only: the sink writes to fd (tmp is NULL
+     * where files are discarded, rp_files_discard) */
+    exr_result_t rv = exr_start_write(&ctx, tmp ? tmp : path, EXR_WRITE_FILE_DIRECTLY, &init);
     if (rv == EXR_ERR_SUCCESS)
         rv = exr_write_image(ctx, img, longnames, &what);
     if (ctx) {

@@ -71,6 +71,12 @@ typedef struct pt_state {
     size_t nbands, nfaces, nsurfaces;
     unsigned want;
     int threads;
+    /* Ranks the work is split over (NULL: alone): image tiles and probe
+     * chunks by global index, so each pixel's and chunk's sums are made
+     * by one rank in the same order as alone, and summing the ranks'
+     * arrays (where the others hold 0) is exact: the answer is
+     * bit-identical for any rank and thread count. */
+    const rp_comm *comm;
     unsigned long spp, samples, batch;
     /* Under an open-ended harness budget, spp and samples stop the run
      * only when given explicitly (solver.h, rp_options.open_ended). */
@@ -223,6 +229,7 @@ static rp_status pt_init(void *state, const rp_scene *scene, const rp_options *o
     s->nsurfaces = rp_scene_nsurfaces(scene);
     s->want = o ? o->want : RP_WANT_IMAGE;
     s->threads = o ? o->threads : 0;
+    s->comm = o ? o->comm : NULL;
     uint64_t seed = o ? o->seed : 0;
     if (s->nbands == 0 || s->nbands > PT_MAX_BANDS)
         return rp_error_set(err, RP_ERR_UNSUPPORTED, "pathtrace: %zu bands (at most %d)",
@@ -459,10 +466,12 @@ static void pt_image_pass(pt_state *s, rp_step_info *info)
     const uint32_t tx = (W + PT_TILE - 1) / PT_TILE, ty = (H + PT_TILE - 1) / PT_TILE;
     const long ntiles = (long)tx * ty;
     const uint32_t index = (uint32_t)s->passes;
-    unsigned long long rays = 0;
+    unsigned long long rays = 0, paths = 0;
 
-#pragma omp parallel for num_threads(pt_nthreads(s)) schedule(dynamic, 1) reduction(+ : rays)
+#pragma omp parallel for num_threads(pt_nthreads(s)) schedule(dynamic, 1) reduction(+ : rays, paths)
     for (long tile = 0; tile < ntiles; tile++) {
+        if (!rp_comm_owns(s->comm, (size_t)tile))
+            continue;
         double L[PT_MAX_BANDS];
         uint32_t x0 = (uint32_t)(tile % tx) * PT_TILE, y0 = (uint32_t)(tile / tx) * PT_TILE;
         uint32_t x1 = x0 + PT_TILE < W ? x0 + PT_TILE : W, y1 = y0 + PT_TILE < H ? y0 + PT_TILE : H;
@@ -486,6 +495,7 @@ static void pt_image_pass(pt_state *s, rp_step_info *info)
             }
             rp_ray_closest_coherent(s->rc, n, s->eye, d, hit, found);
             rays += n;
+            paths += n;
             for (uint32_t i = 0; i < n; i++) {
                 size_t pix = (size_t)y * W + x0 + i;
                 if (found[i])
@@ -506,7 +516,53 @@ static void pt_image_pass(pt_state *s, rp_step_info *info)
     }
     s->passes++;
     info->rays += (double)rays;
-    info->paths += (double)W * H;
+    info->paths += (double)paths;
+}
+
+/* The image's sums (sum, sumsq, shift: n each) of all ranks: the state's
+ * own arrays when alone, else a malloc'd copy (*copy, to free) summed over
+ * the ranks; collective. */
+static rp_status pt_image_sums(const pt_state *s, const double **sum, const double **sumsq, const double **shift,
+                               double **copy, rp_error *err)
+{
+    size_t n = (size_t)s->width * s->height * s->nbands;
+    *copy = NULL;
+    *sum = s->sum;
+    *sumsq = s->sumsq;
+    *shift = s->shift;
+    if (!s->comm)
+        return RP_OK;
+    double *c = malloc((n ? 3 * n : 1) * sizeof *c);
+    if (!c)
+        return rp_error_set(err, RP_ERR_NOMEM, "pathtrace: out of memory (gathering the image)");
+    memcpy(c, s->sum, n * sizeof *c);
+    memcpy(c + n, s->sumsq, n * sizeof *c);
+    memcpy(c + 2 * n, s->shift, n * sizeof *c);
+    rp_comm_sum(s->comm, c, 3 * n);
+    *copy = c;
+    *sum = c;
+    *sumsq = c + n;
+    *shift = c + 2 * n;
+    return RP_OK;
+}
+
+/* After loading all ranks' sums: keep this rank's tiles only, so the sums
+ * over ranks stay exact. */
+static void pt_keep_own_tiles(pt_state *s)
+{
+    if (!s->comm)
+        return;
+    const uint32_t W = s->width, H = s->height, tx = (W + PT_TILE - 1) / PT_TILE;
+    const size_t nb = s->nbands;
+    for (uint32_t y = 0; y < H; y++)
+        for (uint32_t x = 0; x < W; x++) {
+            size_t tile = (size_t)(y / PT_TILE) * tx + x / PT_TILE;
+            if (rp_comm_owns(s->comm, tile))
+                continue;
+            size_t i = ((size_t)y * W + x) * nb;
+            for (size_t b = 0; b < nb; b++)
+                s->sum[i + b] = s->sumsq[i + b] = s->shift[i + b] = 0;
+        }
 }
 
 /* A batch of probe points on every surface: L = Le + one path's estimate
@@ -527,20 +583,23 @@ static rp_status pt_probe_batch(pt_state *s, rp_step_info *info, rp_error *err)
     s->partial = partial;
     const rp_surface *surfs = rp_scene_surfaces(s->scene);
     const unsigned long first = s->probe_done;
-    unsigned long long rays = 0;
+    unsigned long long rays = 0, paths = 0;
 
-#pragma omp parallel for num_threads(pt_nthreads(s)) schedule(dynamic, 1) reduction(+ : rays)
+#pragma omp parallel for num_threads(pt_nthreads(s)) schedule(dynamic, 1) reduction(+ : rays, paths)
     for (long item = 0; item < nitems; item++) {
         double L[PT_MAX_BANDS];
         size_t surf = (size_t)item / nchunks, chunk = (size_t)item % nchunks;
         double *psum = partial + (size_t)item * 2 * nb, *psq = psum + nb;
         for (size_t b = 0; b < 2 * nb; b++)
             psum[b] = 0;
+        if (!rp_comm_owns(s->comm, (size_t)item))
+            continue;
         const rp_area_sampler *as = s->probes[surf];
         if (rp_area_sampler_count(as) == 0)
             continue;
         const double *Le = s->mats[surfs[surf].material].Le;
         unsigned long k0 = chunk * PT_CHUNK, k1 = k0 + PT_CHUNK < n ? k0 + PT_CHUNK : n;
+        paths += k1 - k0;
         for (unsigned long k = k0; k < k1; k++) {
             rp_sample_point sp;
             rp_sampler_start(&s->probe_sampler, surf, (uint32_t)(first + k), &sp);
@@ -565,6 +624,8 @@ static rp_status pt_probe_batch(pt_state *s, rp_step_info *info, rp_error *err)
             }
         }
     }
+    /* each chunk's partial sums from the rank that owns it */
+    rp_comm_sum(s->comm, partial, (size_t)nitems * 2 * nb);
     for (size_t i = 0; i < (size_t)nitems; i++) {
         size_t surf = i / nchunks;
         const double *psum = partial + i * 2 * nb, *psq = psum + nb;
@@ -575,7 +636,7 @@ static rp_status pt_probe_batch(pt_state *s, rp_step_info *info, rp_error *err)
     }
     s->probe_done += n;
     info->rays += (double)rays;
-    info->paths += (double)n * ns;
+    info->paths += (double)paths; /* this rank's: the driver sums the ranks */
     return RP_OK;
 }
 
@@ -636,14 +697,20 @@ static rp_status pt_estimate(const void *state, rp_estimate *e, rp_error *err)
         return rp_error_set(err, RP_ERR_UNSUPPORTED, "pathtrace: no surface averages were asked for at init");
     if (s->want & RP_WANT_IMAGE) {
         size_t n = (size_t)s->width * s->height * nb;
+        const double *sum, *sumsq, *shift;
+        double *copy;
+        rp_status st = pt_image_sums(s, &sum, &sumsq, &shift, &copy, err);
+        if (st != RP_OK)
+            return st;
         for (size_t i = 0; i < n; i++) {
             double m, v;
-            pt_moments(s->sum[i], s->sumsq[i], s->shift[i], (double)s->passes, &m, &v);
+            pt_moments(sum[i], sumsq[i], shift[i], (double)s->passes, &m, &v);
             if (e->radiance)
                 e->radiance[i] = (float)m;
             if (e->variance)
                 e->variance[i] = (float)v;
         }
+        free(copy);
         e->samples = (double)s->passes;
     }
     if (s->want & RP_WANT_SURFACES) {
@@ -714,9 +781,16 @@ static rp_status pt_save(const void *state, FILE *f, rp_error *err)
     int bad = rp_solver_put_u64(f, fields, PT_F_COUNT) != 0;
     bad = bad || rp_solver_put_f64(f, &s->rr_weight, 1) != 0;
     if (s->want & RP_WANT_IMAGE) {
+        /* all ranks' sums, so any rank count can resume (pt_keep_own_tiles) */
         size_t n = (size_t)s->width * s->height * s->nbands;
-        bad = bad || rp_solver_put_f64(f, s->sum, n) != 0 || rp_solver_put_f64(f, s->sumsq, n) != 0 ||
-              rp_solver_put_f64(f, s->shift, n) != 0;
+        const double *sum, *sumsq, *shift;
+        double *copy;
+        rp_status st = pt_image_sums(s, &sum, &sumsq, &shift, &copy, err);
+        if (st != RP_OK)
+            return st;
+        bad = bad || rp_solver_put_f64(f, sum, n) != 0 || rp_solver_put_f64(f, sumsq, n) != 0 ||
+              rp_solver_put_f64(f, shift, n) != 0;
+        free(copy);
     }
     if (s->want & RP_WANT_SURFACES) {
         size_t n = s->nsurfaces * s->nbands;
@@ -793,6 +867,8 @@ static rp_status pt_load(void *state, FILE *f, rp_step_info *info, rp_error *err
     }
     if (bad)
         return rp_error_set(err, RP_ERR_INPUT, "pathtrace: state truncated (sums)");
+    if (s->want & RP_WANT_IMAGE)
+        pt_keep_own_tiles(s);
     s->passes = (unsigned long)passes;
     s->probe_done = (unsigned long)probe_done;
 
@@ -832,4 +908,5 @@ const rp_solver_type rp_solver_pathtrace = {
     .monte_carlo = 1,
     .samples_name = "samples per pixel",
     .surfaces_cost = 1,
+    .distributed = 1,
 };
