@@ -392,8 +392,8 @@ int rp_cmd_reference(int argc, char **argv)
 
 int rp_cmd_bench(int argc, char **argv)
 {
-    static const char *const extra[] = {"methods", "budget", "seeds", "checkpoints", "target", "cache",
-                                        "reference-spp", "reference-samples", "exposure", "resume",
+    static const char *const extra[] = {"methods", "budget", "iterations", "seeds", "checkpoints", "target",
+                                        "cache", "reference-spp", "reference-samples", "exposure", "resume",
                                         "export-json", "export-csv", NULL};
     static const char *const flags[] = {"--surfaces", NULL};
     int found[1] = {0};
@@ -417,11 +417,23 @@ int rp_cmd_bench(int argc, char **argv)
         rc = parse_positive(&cli, "budget", &budget);
     if (!rc)
         rc = parse_positive(&cli, "target", &target);
+    /* --iterations N: the budget in the methods' iterations, so that the
+     * work done (every column but times and memory) is the same on any
+     * machine, rank count or load */
+    double iterations = 0;
+    if (!rc)
+        rc = parse_positive(&cli, "iterations", &iterations);
+    if (!rc && iterations > 0 && (rp_cli_extra(&cli, "budget") || cli.time_budget > 0)) {
+        fprintf(stderr, "radpt bench: --iterations and --budget (or --time) exclude each other (see radpt help)\n");
+        rc = 2;
+    }
     rp_exposure exposure;
     if (!rc)
         rc = parse_exposure(&cli, &exposure);
     if (!rc && cli.time_budget > 0)
         budget = cli.time_budget; /* --time works as --budget */
+    if (iterations > 0)
+        budget = iterations;
     const char *dir = NULL;
     int resume = 0;
     if (!rc)
@@ -469,9 +481,10 @@ int rp_cmd_bench(int argc, char **argv)
         st = rp_reference_key(scene, &rp, keytext, sizeof keytext, key, &err);
         rp_scene_hash(scene, hash);
         snprintf(identity, sizeof identity,
-                 "bench scene %s reference %s methods %s budget %.17g checkpoints %lu seeds %lu seed %llu "
+                 "bench scene %s reference %s methods %s budget %.17g%s checkpoints %lu seeds %lu seed %llu "
                  "surfaces %d",
-                 hash, key, list, budget, levels, seeds, (unsigned long long)cli.seed, found[0]);
+                 hash, key, list, budget, iterations > 0 ? " iterations" : "", levels, seeds,
+                 (unsigned long long)cli.seed, found[0]);
         if (st == RP_OK)
             st = rp_journal_open(dir, identity, resume, &journal, &err);
         if (st == RP_OK && resume)
@@ -487,7 +500,8 @@ int rp_cmd_bench(int argc, char **argv)
                               .log = front_log, .log_ctx = &fr, .journal = journal, .image_dir = dir,
                               .on_run = on_bench_run, .on_run_ctx = &sink};
         bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = (unsigned)levels,
-                                     .schedule = RP_SCHEDULE_TIME, .threads = cli.threads,
+                                     .schedule = iterations > 0 ? RP_SCHEDULE_ITERATIONS : RP_SCHEDULE_TIME,
+                                     .threads = cli.threads,
                                      .surfaces_for_mc = found[0], .keep_image = 1,
                                      .progress = front_progress, .progress_ctx = &fr, .cancel = &study_cancel};
         st = rp_bench_run(scene, cli.scene, ref, methods, nmethods, &bp, &bench, &err);

@@ -75,9 +75,11 @@ static int save_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp
 {
     saving *sv = ctx;
     double excluded = 0;
-    if (sv->ck && sv->ck->path && t->stop == RP_STOP_NONE && rp_clock() - sv->last >= sv->ck->every) {
+    /* solver seconds, which all MPI ranks share (the driver's), so that
+     * they save (collectively) together */
+    if (sv->ck && sv->ck->path && t->stop == RP_STOP_NONE && t->wall_s - sv->last >= sv->ck->every) {
         *st = write_ckpt(sv->ck, s, t, &excluded, err);
-        sv->last = rp_clock();
+        sv->last = t->wall_s;
     }
     return 0;
 }
@@ -100,7 +102,7 @@ static rp_status run_solver(rp_solver *solver, const rp_cli *cli, const char *la
         rp_progress_end(&bar);
         return ck->path ? write_ckpt(ck, solver, tot, &excluded, err) : RP_OK;
     }
-    saving sv = {.ck = ck, .last = rp_clock()};
+    saving sv = {.ck = ck, .last = tot->wall_s};
     rp_drive_params dp = {.size = sizeof dp, .budget = cli->time_budget, .stop_at_rule = 1, .cancel = &interrupted,
                           .after_step = save_after_step, .ctx = &sv, .progress = bar_progress,
                           .progress_ctx = &bar};

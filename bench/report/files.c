@@ -20,6 +20,11 @@ void rp_files_discard(int on)
     discarding = on;
 }
 
+int rp_files_discarding(void)
+{
+    return discarding;
+}
+
 rp_status rp_mkdirs(const char *path, rp_error *err)
 {
     if (discarding)

@@ -14,6 +14,7 @@ rp_status rp_mkdirs(const char *path, rp_error *err);
 /* on: every file written through rp_temp_open and rp_out goes to /dev/null
  * and rp_mkdirs makes nothing (MPI ranks other than 0, bench/run/mpi.h). */
 void rp_files_discard(int on);
+int rp_files_discarding(void);
 
 /* The one atomic file writer of radpt: a fresh PATH.tmp.PID.N (O_EXCL),
  * written, flushed to disk (fsync), closed and renamed over PATH; any

@@ -10,6 +10,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "bench/report/files.h"
 #include "bench/report/spectrum.h"
 
 /* Runs argv with cwd dir, stdout and stderr to log (may be NULL: /dev/null);
@@ -58,6 +59,8 @@ const char *rp_gnuplot_png_terminal(void)
 
 rp_status rp_gnuplot_run(const char *dir, const char *script, rp_error *err)
 {
+    if (rp_files_discarding()) /* not the rank that writes files (files.h) */
+        return RP_OK;
     if (!rp_gnuplot_png_terminal())
         return rp_error_set(err, RP_ERR_UNSUPPORTED, "gnuplot is not installed (Debian: gnuplot-nox)");
     char *const argv[] = {"gnuplot", (char *)script, NULL};

@@ -96,7 +96,7 @@ rp_status rp_bench_write_runs_csv(const rp_bench *b, const char *dir, rp_error *
     FILE *f = o.f;
     fputs("method,spec,seed,checkpoint,target_s,wall_s,cpu_s,steps,rays,paths,samples,iterations,"
           "form_factors,work,residual,unshot,peak_rss_mb,solver_mb,rmse,rmse_debiased,relmse,mae,surface_err,"
-          "ref_rmse_se,ref_flag,converged,final,measure_s\n",
+          "ref_rmse_se,ref_flag,converged,final,measure_s,rank,threads\n",
           f);
     for (size_t r = 0; r < b->nruns; r++) {
         const rp_trial *run = &b->runs[r];
@@ -117,7 +117,7 @@ rp_status rp_bench_write_runs_csv(const rp_bench *b, const char *dir, rp_error *
             }
             fprintf(f, "%d,%d,%d,", c->ref_flag, c->converged, c->final);
             csv_num(f, c->measure_s);
-            fputc('\n', f);
+            fprintf(f, ",%d,%d\n", run->rank, run->threads);
         }
     }
     return rp_out_close(&o, 1, err);

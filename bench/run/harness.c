@@ -13,6 +13,7 @@
 #include "bench/report/files.h"
 #include "bench/run/clock.h"
 #include "bench/run/log.h"
+#include "bench/run/mpi.h"
 
 /* ------------------------------------------------------------- specs */
 
@@ -303,6 +304,8 @@ rp_status rp_harness_run(const rp_scene *scene, const rp_reference *ref, const r
     rp_peak_rss_reset();
     rp_drive_totals tot;
     memset(&tot, 0, sizeof tot);
+    run->rank = rp_mpi_rank();
+    run->threads = hp->threads ? hp->threads : omp_get_max_threads();
     rp_status st = rp_drive_create(m->type, scene, &o, &c.solver, &tot, &rerr);
     checkpointing ck = {.c = &c, .run = run, .hp = hp, .budget = hp->budget, .k = (int)levels - 1};
     char label[200];
@@ -536,16 +539,17 @@ static void image_path(const rp_bench *b, const char *key, char *out, size_t n)
     rp_path_join(out, n, b->params.image_dir ? b->params.image_dir : ".", name);
 }
 
-static rp_status trial_put(const rp_bench *b, const char *key, const rp_trial *run, rp_error *err)
+/* A run's numbers (malloc'd, *n of them): status, rows, surface values,
+ * whether an image is kept, then the surface values, each row's fields,
+ * and the rank and threads it ran on (absent from records of radpt
+ * 0.15.0 and earlier). */
+static double *trial_pack(const rp_bench *b, const rp_trial *run, size_t *n)
 {
-    rp_journal *j = b->params.journal;
-    if (!j)
-        return RP_OK;
     size_t ns = run->surfaces ? rp_scene_nsurfaces(b->scene) * rp_scene_nbands(b->scene) : 0;
-    size_t n = 4 + ns + CP_FIELDS * run->ncp;
-    double *v = malloc(n * sizeof *v);
+    *n = 4 + ns + CP_FIELDS * run->ncp + 2;
+    double *v = malloc(*n * sizeof *v);
     if (!v)
-        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+        return NULL;
     v[0] = run->status;
     v[1] = (double)run->ncp;
     v[2] = (double)ns;
@@ -554,6 +558,48 @@ static rp_status trial_put(const rp_bench *b, const char *key, const rp_trial *r
         v[4 + i] = run->surfaces[i];
     for (size_t i = 0; i < run->ncp; i++)
         cp_to(&run->cp[i], v + 4 + ns + CP_FIELDS * i);
+    v[*n - 2] = run->rank;
+    v[*n - 1] = run->threads;
+    return v;
+}
+
+/* The inverse of trial_pack (run->image stays NULL; *has_image says
+ * whether there was one); 0 when v is malformed. */
+static int trial_unpack(const rp_bench *b, const double *v, size_t n, rp_trial *run, int *has_image)
+{
+    if (n < 4)
+        return 0;
+    size_t ncp = (size_t)v[1], ns = (size_t)v[2], base = 4 + ns + CP_FIELDS * ncp;
+    if (!(v[1] >= 1 && v[2] >= 0 && (n == base || n == base + 2) &&
+          (ns == 0 || ns == rp_scene_nsurfaces(b->scene) * rp_scene_nbands(b->scene))))
+        return 0;
+    run->status = (rp_status)v[0];
+    run->cp = calloc(ncp, sizeof *run->cp);
+    run->surfaces = ns ? malloc(ns * sizeof *run->surfaces) : NULL;
+    if (!run->cp || (ns && !run->surfaces)) {
+        rp_trial_free(run);
+        return 0;
+    }
+    run->ncp = ncp;
+    for (size_t i = 0; i < ns; i++)
+        run->surfaces[i] = v[4 + i];
+    for (size_t i = 0; i < ncp; i++)
+        cp_from(v + 4 + ns + CP_FIELDS * i, &run->cp[i]);
+    run->rank = n == base + 2 ? (int)v[base] : 0;
+    run->threads = n == base + 2 ? (int)v[base + 1] : b->threads;
+    *has_image = v[3] != 0;
+    return 1;
+}
+
+static rp_status trial_put(const rp_bench *b, const char *key, const rp_trial *run, rp_error *err)
+{
+    rp_journal *j = b->params.journal;
+    if (!j)
+        return RP_OK;
+    size_t n;
+    double *v = trial_pack(b, run, &n);
+    if (!v)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     rp_status st = RP_OK;
     if (run->image) {
         /* the image first: a record that exists always has its image */
@@ -601,34 +647,13 @@ static rp_status trial_get(const rp_bench *b, const char *key, uint64_t seed, in
     double *v = malloc((n + 1) * sizeof *v);
     if (!v)
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
-    size_t ns = 0, ncp = 0;
-    int ok = n >= 4 && rp_journal_get_doubles(b->params.journal, key, v, n);
-    if (ok) {
-        ncp = (size_t)v[1];
-        ns = (size_t)v[2];
-        ok = n == 4 + ns + CP_FIELDS * ncp && ncp > 0 &&
-             (ns == 0 || ns == rp_scene_nsurfaces(b->scene) * rp_scene_nbands(b->scene));
-    }
-    if (!ok) {
-        free(v);
-        return rp_error_set(err, RP_ERR_INPUT, "%s: the record of '%s' is malformed",
-                            rp_journal_path(b->params.journal), key);
-    }
-    run->status = (rp_status)v[0];
-    run->cp = calloc(ncp, sizeof *run->cp);
-    run->surfaces = ns ? malloc(ns * sizeof *run->surfaces) : NULL;
-    if (!run->cp || (ns && !run->surfaces)) {
-        free(v);
-        rp_trial_free(run);
-        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
-    }
-    run->ncp = ncp;
-    for (size_t i = 0; i < ns; i++)
-        run->surfaces[i] = v[4 + i];
-    for (size_t i = 0; i < ncp; i++)
-        cp_from(v + 4 + ns + CP_FIELDS * i, &run->cp[i]);
-    int has_image = v[3] != 0;
+    int has_image = 0;
+    int ok = n >= 4 && rp_journal_get_doubles(b->params.journal, key, v, n) &&
+             trial_unpack(b, v, n, run, &has_image);
     free(v);
+    if (!ok)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: the record of '%s' is malformed (or out of memory)",
+                            rp_journal_path(b->params.journal), key);
     if (run->status != RP_OK) {
         char ekey[640];
         snprintf(ekey, sizeof ekey, "%s#error", key);
@@ -651,6 +676,217 @@ static rp_status trial_get(const rp_bench *b, const char *key, uint64_t seed, in
         }
     }
     return RP_OK;
+}
+
+/* ------------------------------------------- runs handed out to ranks
+ *
+ * Under mpirun (docs/design.md, "MPI as a layer") the bench's runs are
+ * independent: run k of the study goes to rank k mod K, which runs it
+ * alone (its solver sees no communicator: its timings are its own rank's,
+ * with the threads it was given).  Then, in the study's order, each run's
+ * record (trial_pack: the journal's numbers, the error text, the kept
+ * image) goes from the rank that holds it to every rank, and rank 0
+ * journals and logs it.  Every rank ends with the same runs, so reports
+ * (written by rank 0) and anything an experiment decides from them are the
+ * same as alone; runs recorded by an earlier, interrupted study are read
+ * back by rank 0 and handed out the same way. */
+
+typedef struct bench_slot {
+    size_t method;
+    uint64_t seed;
+    int keep_image;
+    char key[600];
+} bench_slot;
+
+/* Sends slot k's outcome from `holder` to every rank: head {state, count
+ * of numbers, error bytes, image floats}, state 1 a finished run, 0 none
+ * (not run: interrupted), -1 the harness failed (its message follows). */
+static rp_status spread_run(rp_bench *b, const rp_comm *comm, int holder, rp_trial *run, int state,
+                            rp_status hst, const rp_error *herr, rp_error *err)
+{
+    double head[5] = {0};
+    double *v = NULL;
+    size_t n = 0;
+    if (comm->rank == holder) {
+        if (state == 1 && !(v = trial_pack(b, run, &n)))
+            state = -1, hst = RP_ERR_NOMEM;
+        head[0] = state;
+        head[1] = (double)n;
+        head[2] = state == -1 ? (double)sizeof herr->message : (double)sizeof run->error;
+        head[3] = state == 1 && run->image ? (double)image_values(b) : 0;
+        head[4] = hst;
+    }
+    rp_comm_bcast(comm, head, sizeof head, holder);
+    state = (int)head[0];
+    if (state == 0) {
+        free(v);
+        return RP_OK;
+    }
+    if (state == -1) {
+        rp_error e;
+        if (comm->rank == holder)
+            memcpy(e.message, herr->message, sizeof e.message);
+        rp_comm_bcast(comm, e.message, sizeof e.message, holder);
+        e.message[sizeof e.message - 1] = '\0';
+        free(v);
+        return rp_error_set(err, (rp_status)head[4], "%s", e.message);
+    }
+    n = (size_t)head[1];
+    size_t nimage = (size_t)head[3];
+    if (comm->rank != holder) {
+        v = malloc((n ? n : 1) * sizeof *v);
+        memset(run, 0, sizeof *run);
+        run->image = nimage ? malloc(nimage * sizeof *run->image) : NULL;
+    }
+    /* every rank takes part in every broadcast, even out of memory */
+    double short_of_memory = !(v && (!nimage || run->image));
+    rp_comm_max(comm, &short_of_memory, 1);
+    if (short_of_memory) {
+        free(v);
+        if (comm->rank != holder)
+            rp_trial_free(run);
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory (handing out the runs)");
+    }
+    rp_comm_bcast(comm, v, n * sizeof *v, holder);
+    rp_comm_bcast(comm, run->error, sizeof run->error, holder);
+    if (nimage)
+        rp_comm_bcast(comm, run->image, nimage * sizeof *run->image, holder);
+    if (comm->rank != holder) {
+        float *image = run->image;
+        char error[sizeof run->error];
+        memcpy(error, run->error, sizeof error);
+        int has_image = 0;
+        run->image = NULL;
+        if (!trial_unpack(b, v, n, run, &has_image)) {
+            free(v);
+            free(image);
+            return rp_error_set(err, RP_ERR_RUNTIME, "a run's record came malformed from rank %d", holder);
+        }
+        run->image = image;
+        memcpy(run->error, error, sizeof error);
+    }
+    free(v);
+    return RP_OK;
+}
+
+static void bench_log_result(rp_bench *b, const rp_trial *run)
+{
+    const rp_method_spec *m = &b->methods[run->method];
+    if (run->status != RP_OK) {
+        bench_log(b, "%s seed %llu failed: %s", m->text, (unsigned long long)run->seed, run->error);
+    } else if (run->ncp) {
+        const rp_checkpoint *cp = &run->cp[run->ncp - 1];
+        char rmse[32] = "n/a", surf[32] = "n/a";
+        if (isfinite(cp->rmse))
+            snprintf(rmse, sizeof rmse, "%.4g", cp->rmse);
+        if (isfinite(cp->surface_err))
+            snprintf(surf, sizeof surf, "%.4g", cp->surface_err);
+        bench_log(b, "  %s seed %llu: %.3g s, RMSE %s, surface error %s (rank %d, %d threads)", m->text,
+                  (unsigned long long)run->seed, cp->wall_s, rmse, surf, run->rank, run->threads);
+    }
+}
+
+static rp_status bench_spread(rp_bench *b, const rp_comm *comm, bench_slot *slots, size_t nslots, rp_error *err)
+{
+    rp_trial *done = calloc(nslots ? nslots : 1, sizeof *done);
+    double *state = calloc(nslots ? nslots : 1, sizeof *state); /* 1 recorded, 0 to run */
+    rp_status st = RP_OK;
+    double short_of_memory = !(done && state);
+    rp_comm_max(comm, &short_of_memory, 1);
+    if (short_of_memory) {
+        free(done);
+        free(state);
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    }
+    /* what an earlier study recorded: read by rank 0 */
+    rp_error rerr;
+    rp_error_clear(&rerr);
+    rp_status rst = RP_OK;
+    if (comm->rank == 0)
+        for (size_t k = 0; k < nslots && rst == RP_OK; k++) {
+            rst = trial_get(b, slots[k].key, slots[k].seed, slots[k].keep_image, &done[k], &rerr);
+            state[k] = rst == RP_OK && done[k].cp;
+        }
+    double bad = rst != RP_OK;
+    rp_comm_max(comm, &bad, 1);
+    if (bad) {
+        st = spread_run(b, comm, 0, NULL, -1, rst, &rerr, err);
+        goto out;
+    }
+    rp_comm_bcast(comm, state, nslots * sizeof *state, 0);
+    size_t todo = 0;
+    for (size_t k = 0; k < nslots; k++)
+        todo += state[k] == 0;
+    bench_log(b, "%zu runs handed out to %d ranks (run k to rank k mod %d); rank 0 shows its own runs' progress",
+              todo, comm->size, comm->size);
+
+    /* this rank's runs; slot k's rank is k mod K */
+    rp_status hst = RP_OK;
+    rp_error herr;
+    rp_error_clear(&herr);
+    int interrupted = 0;
+    for (size_t k = 0; k < nslots && hst == RP_OK && !interrupted; k++) {
+        if (state[k] != 0 || !rp_comm_owns(comm, k))
+            continue;
+        if (rp_cancelled(b->params.run.cancel)) {
+            interrupted = 1;
+            break;
+        }
+        const rp_method_spec *m = &b->methods[slots[k].method];
+        rp_harness_params hp = b->params.run;
+        hp.keep_image = slots[k].keep_image;
+        bench_log(b, "run %zu of %zu: %s, seed %llu, budget %g %s (rank %d)", k + 1, nslots, m->text,
+                  (unsigned long long)slots[k].seed, hp.budget,
+                  hp.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s", comm->rank);
+        hst = rp_harness_run(b->scene, b->ref, m, slots[k].seed, &hp, &done[k], &herr);
+        if (hst == RP_OK && done[k].status == RP_ERR_INTERRUPTED) {
+            rp_trial_free(&done[k]);
+            interrupted = 1;
+        } else if (hst == RP_OK)
+            state[k] = 2; /* finished here */
+    }
+
+    /* every run's record to every rank, in the study's order */
+    for (size_t k = 0; k < nslots && st == RP_OK; k++) {
+        int holder = state[k] == 1 ? 0 : (int)(k % (size_t)comm->size);
+        int mine = comm->rank == holder;
+        int what = !mine ? 0 : state[k] == 1 || state[k] == 2 ? 1 : hst != RP_OK ? -1 : 0;
+        rp_trial *run = &b->runs[b->nruns];
+        if (mine) {
+            *run = done[k];
+            memset(&done[k], 0, sizeof done[k]);
+        }
+        st = spread_run(b, comm, holder, run, what, hst, &herr, err);
+        if (st != RP_OK)
+            break;
+        if (!run->cp) /* not run: interrupted */
+            continue;
+        run->method = slots[k].method;
+        run->seed = slots[k].seed;
+        if (state[k] == 1) {
+            b->resumed++;
+            bench_log(b, "run %zu of %zu: %s seed %llu: recorded, read back from %s", k + 1, nslots,
+                      b->methods[run->method].text, (unsigned long long)run->seed,
+                      rp_journal_path(b->params.journal));
+        } else if ((st = trial_put(b, slots[k].key, run, err)) != RP_OK)
+            break;
+        b->nruns++;
+        if (run->status != RP_OK)
+            b->failures++;
+        if (state[k] != 1)
+            bench_log_result(b, run);
+        if (b->params.on_run)
+            b->params.on_run(b->params.on_run_ctx, b);
+    }
+    double any = interrupted;
+    rp_comm_max(comm, &any, 1);
+    b->interrupted = any != 0 || b->nruns < nslots;
+out:
+    for (size_t k = 0; k < nslots; k++)
+        rp_trial_free(&done[k]);
+    free(done);
+    free(state);
+    return st;
 }
 
 rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_reference *ref,
@@ -687,6 +923,32 @@ rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_r
         spec_copy(&b->methods[i], &methods[i]);
     b->planned = nruns;
     b->threads = b->params.run.threads ? b->params.run.threads : omp_get_max_threads();
+    const rp_comm *comm = rp_mpi_world();
+    if (comm) {
+        bench_slot *slots = calloc(nruns ? nruns : 1, sizeof *slots);
+        size_t k = 0;
+        for (size_t i = 0; slots && i < nmethods; i++) {
+            unsigned ns = rp_method_is_monte_carlo(&b->methods[i]) ? b->params.nseeds : 1;
+            for (unsigned s = 0; s < ns; s++, k++) {
+                slots[k].method = i;
+                slots[k].seed = b->params.seed + s;
+                slots[k].keep_image = b->params.run.keep_image && s == 0; /* the sheet shows the first seed */
+                snprintf(slots[k].key, sizeof slots[k].key, "%s%s seed %llu",
+                         b->params.journal_prefix ? b->params.journal_prefix : "", b->methods[i].text,
+                         (unsigned long long)slots[k].seed);
+            }
+        }
+        rp_status st = slots ? bench_spread(b, comm, slots, nruns, err)
+                             : rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+        free(slots);
+        if (st != RP_OK) {
+            rp_bench_destroy(b);
+            return st;
+        }
+        rp_bench_summarise(b);
+        *out = b;
+        return RP_OK;
+    }
     size_t k = 0;
     for (size_t i = 0; i < nmethods && !b->interrupted; i++) {
         unsigned ns = rp_method_is_monte_carlo(&b->methods[i]) ? b->params.nseeds : 1;

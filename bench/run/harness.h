@@ -112,6 +112,7 @@ typedef struct rp_trial {
     double *surfaces;       /* final surface averages, nsurfaces * nbands */
     rp_status status;       /* RP_OK, or why the run stopped */
     char error[1024];
+    int rank, threads;      /* the MPI rank (0 alone) and threads it ran on */
 } rp_trial;
 
 /* Runs one method with one seed against ref (which gives the mask and the

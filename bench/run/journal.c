@@ -131,6 +131,8 @@ rp_status rp_journal_open(const char *dir, const char *identity, int resume, rp_
     j->fd = -1;
     rp_path_join(j->path, sizeof j->path, dir, "journal.txt");
     rp_status st = RP_OK;
+    /* MPI ranks other than 0 read the journal but never write it */
+    const char *wpath = rp_files_discarding() ? "/dev/null" : j->path;
     if (resume) {
         st = load(j, identity, err);
         if (st == RP_OK) {
@@ -146,10 +148,10 @@ rp_status rp_journal_open(const char *dir, const char *identity, int resume, rp_
                 st = rp_out_close(&o, 1, err);
             }
         }
-        if (st == RP_OK && (j->fd = open(j->path, O_WRONLY | O_APPEND)) < 0)
+        if (st == RP_OK && (j->fd = open(wpath, O_WRONLY | O_APPEND)) < 0)
             st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot open: %s", j->path, strerror(errno));
     } else {
-        j->fd = open(j->path, O_WRONLY | O_CREAT | O_TRUNC, 0666);
+        j->fd = open(wpath, O_WRONLY | O_CREAT | O_TRUNC, 0666);
         if (j->fd < 0)
             st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot create: %s", j->path, strerror(errno));
         if (st == RP_OK) {

@@ -18,6 +18,7 @@
 #include "bench/run/metrics.h"
 #include "bench/report/plot.h"
 #include "bench/run/driver.h"
+#include "bench/run/mpi.h"
 #include "bench/run/resume.h"
 
 /* Sub-pixel rays per side for the pixel mask. */
@@ -372,10 +373,12 @@ static int ref_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp_
         sv->interrupted = 1;
         return 1;
     }
-    if (sv->ckpt && rp_clock() - sv->last_ckpt >= sv->every) {
+    /* solver seconds, which all MPI ranks share (the driver's), so that
+     * they save (collectively) together */
+    if (sv->ckpt && t->wall_s - sv->last_ckpt >= sv->every) {
         ref_totals(sv, t);
         *st = rp_resume_save(sv->ckpt, sv->id, s, err);
-        sv->last_ckpt = rp_clock();
+        sv->last_ckpt = t->wall_s;
     }
     return 0;
 }
@@ -399,7 +402,8 @@ static rp_status make_pathtraced(const rp_scene *scene, const char *scene_name, 
     rp_options o = {.size = sizeof o,
                     .want = RP_WANT_SURFACES | (r->radiance ? RP_WANT_IMAGE : 0),
                     .seed = seed, .threads = p ? p->threads : 0,
-                    .keys = keys, .values = values, .count = 4, .cancel = PARAM(p, cancel, NULL)};
+                    .keys = keys, .values = values, .count = 4, .cancel = PARAM(p, cancel, NULL),
+                    .comm = rp_mpi_world()};
     rp_solver *solver = NULL;
     rp_status st = rp_solver_create(rp_solver_lookup("pathtrace"), scene, &o, &solver, err);
     if (st != RP_OK)
@@ -436,8 +440,7 @@ static rp_status make_pathtraced(const rp_scene *scene, const char *scene_name, 
         id.paths = got.paths;
         done = last_info.converged;
     }
-    ref_saving sv = {.ckpt = ckpt, .every = every, .stop = stop, .id = &id, .prior = prior,
-                     .last_ckpt = rp_clock()};
+    ref_saving sv = {.ckpt = ckpt, .every = every, .stop = stop, .id = &id, .prior = prior};
     char label[96];
     snprintf(label, sizeof label, "reference, %lu spp", spp);
     rp_drive_totals tot;
