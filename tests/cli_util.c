@@ -28,14 +28,14 @@ char *rp_read_file(const char *path)
     return s;
 }
 
-rp_run rp_run_radpt(const char *args)
+static rp_run run_prefixed(const char *prefix, const char *args)
 {
     char out[64], err[64];
     snprintf(out, sizeof out, "/tmp/rp_test_out.%d", (int)getpid());
     snprintf(err, sizeof err, "/tmp/rp_test_err.%d", (int)getpid());
     size_t n = strlen(args) + 1024;
     char *cmd = malloc(n);
-    snprintf(cmd, n, "cd '%s' && '%s' %s >%s 2>%s </dev/null", RP_SOURCE_DIR, RP_BIN, args, out, err);
+    snprintf(cmd, n, "cd '%s' && %s'%s' %s >%s 2>%s </dev/null", RP_SOURCE_DIR, prefix, RP_BIN, args, out, err);
     int st = system(cmd);
     free(cmd);
     rp_run r;
@@ -45,6 +45,19 @@ rp_run rp_run_radpt(const char *args)
     unlink(out);
     unlink(err);
     return r;
+}
+
+rp_run rp_run_radpt(const char *args)
+{
+    return run_prefixed("", args);
+}
+
+rp_run rp_run_radpt_mpi(int ranks, const char *args)
+{
+    char prefix[160];
+    snprintf(prefix, sizeof prefix, "mpirun -q --oversubscribe --bind-to none %s-np %d ",
+             geteuid() == 0 ? "--allow-run-as-root " : "", ranks);
+    return run_prefixed(prefix, args);
 }
 
 void rp_run_free(rp_run *r)

@@ -14,6 +14,10 @@ typedef struct rp_run {
 rp_run rp_run_radpt(const char *args);
 void rp_run_free(rp_run *r);
 
+/* Runs "mpirun -np ranks RP_BIN args" the same way (--oversubscribe, no
+ * core binding, -q; --allow-run-as-root when run as root, as CI is). */
+rp_run rp_run_radpt_mpi(int ranks, const char *args);
+
 /* The number in a JSON object following "key": after the first occurrence
  * of anchor (a string that must occur in text); NAN if absent. */
 double rp_json_number_after(const char *text, const char *anchor, const char *key);

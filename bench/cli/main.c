@@ -140,7 +140,9 @@ static int dispatch(int argc, char **argv)
     }
     const char *cmd = argv[1];
     if (!strcmp(cmd, "--version") || !strcmp(cmd, "version")) {
-        printf("radpt %s (git %s)\n", RP_VERSION, RP_GIT_DESCRIBE);
+        char mpi[256];
+        rp_mpi_describe(mpi, sizeof mpi);
+        printf("radpt %s (git %s)\n%s\n", RP_VERSION, RP_GIT_DESCRIBE, mpi);
         return 0;
     }
     if (!strcmp(cmd, "help") || !strcmp(cmd, "--help") || !strcmp(cmd, "-h")) {

@@ -152,3 +152,17 @@ int rp_mpi_finish(int code)
         fclose(captured);
     return result;
 }
+
+void rp_mpi_describe(char *buf, size_t n)
+{
+    char lib[MPI_MAX_LIBRARY_VERSION_STRING] = "";
+    int len = 0;
+    MPI_Get_library_version(lib, &len); /* allowed before MPI_Init */
+    char *nl = strchr(lib, ',');
+    if (nl)
+        *nl = '\0';
+    if (started)
+        snprintf(buf, n, "%s; under mpirun: rank %d of %d", lib, world_rank, world_size);
+    else
+        snprintf(buf, n, "%s linked; not under mpirun: MPI not initialised", lib);
+}

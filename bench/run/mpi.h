@@ -13,6 +13,8 @@
 #ifndef RP_MPI_H
 #define RP_MPI_H
 
+#include <stddef.h>
+
 #include "solvers/comm.h"
 
 /* Initialises MPI when launched by mpirun; a no-op otherwise.  Returns 0,
@@ -35,5 +37,9 @@ int rp_mpi_size(void);
  * printed them).  Waits without spinning, so ranks idle while rank 0
  * works alone cost no CPU. */
 int rp_mpi_finish(int code);
+
+/* "Open MPI v4.1.4; under mpirun: rank 0 of 2", or "... linked; not under
+ * mpirun: MPI not initialised" (radpt --version). */
+void rp_mpi_describe(char *buf, size_t n);
 
 #endif
