@@ -8,6 +8,7 @@
 #   make asan     the same tests under AddressSanitizer + UBSan
 #   make demo     render the built-in Cornell box
 #   make bench    throughput benchmarks on the Cornell box
+#   make bench-mpi  speedup and memory per rank under Open MPI (K = 1, 2)
 #   make valgrind the demo's commands, cut down, under valgrind memcheck
 
 DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
@@ -56,7 +57,7 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off scenes/data/elephant.off scenes/data/armadillo.off
 
-.PHONY: all deps test check asan demo bench clean meshes fuzz fuzz-deps valgrind format
+.PHONY: all deps test check asan demo bench bench-mpi clean meshes fuzz fuzz-deps valgrind format
 all: radpt meshes
 
 radpt: $(BUILD)/radpt
@@ -135,6 +136,13 @@ bench: deps
 	mkdir -p out
 	./radpt bench scenes/cornell.scene --methods hierarchical:bf-epsilon=0.05:min-area=1e-4 \
 		--budget 0.46 --checkpoints 2 --seeds 1 -o out/bench-hierarchical
+
+# Strong scaling under Open MPI: K = 1 and 2 ranks, one thread each, on the
+# Cornell reference render and a uniform Gauss-Seidel of ELEMENTS elements
+# (bench/mpi.sh prints speedups, memory per rank and agreement).
+bench-mpi: deps
+	@$(MAKE) --no-print-directory radpt meshes
+	bench/mpi.sh
 
 # Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
 # for FUZZ_SECONDS; new corpus entries land in tests/fuzz/<target>/.

@@ -16,6 +16,7 @@
 #include "bench/cli/cli.h"
 #include "bench/cli/commands.h"
 #include "bench/report/image.h"
+#include "bench/run/clock.h"
 #include "bench/run/driver.h"
 #include "bench/run/mpi.h"
 #include "bench/run/resume.h"
@@ -456,6 +457,14 @@ int rp_cmd_render(int argc, char **argv)
         printf(", %.4g form factors", tot.sum.form_factors);
     if (tot.last.memory > 0)
         printf(", %.1f MiB held by the method", tot.last.memory / 1048576.0);
+    if (rp_solver_comm(solver)) {
+        /* split over ranks: the largest rank's memory (make bench-mpi) */
+        double mem[2] = {tot.last.memory / 1048576.0, rp_peak_rss_mb()};
+        rp_comm_max(rp_solver_comm(solver), mem, 2);
+        printf(", %d ranks (per rank at most: %.1f MiB held by the method, peak RSS %.1f MiB)", rp_mpi_size(),
+               mem[0], mem[1]);
+    } else if (rp_mpi_size() > 1)
+        printf(", on rank 0 alone (%s does not split its work over ranks)", cli.method);
     printf("\n");
     if (cli.png)
         printf("wrote %s\n", cli.png);
