@@ -1,9 +1,11 @@
 /* Open MPI as a layer (mpi.h). */
+#define _GNU_SOURCE /* sched_getaffinity, CPU_COUNT */
 #include "bench/run/mpi.h"
 
 #include "bench/report/files.h"
 
 #include <fcntl.h>
+#include <sched.h>
 #include <limits.h>
 #include <mpi.h>
 #include <stdio.h>
@@ -76,6 +78,16 @@ int rp_mpi_start(int *argc, char ***argv)
     MPI_Comm_size(MPI_COMM_WORLD, &world_size);
     world.rank = world_rank;
     world.size = world_size;
+    /* mpirun binds each rank to one core when K <= 2: say so where that
+     * leaves cores idle (threads follow the binding: OpenMP's default
+     * counts the cores a process may use) */
+    cpu_set_t cpus;
+    long online = sysconf(_SC_NPROCESSORS_ONLN);
+    if (world_rank == 0 && sched_getaffinity(0, sizeof cpus, &cpus) == 0 &&
+        (long)CPU_COUNT(&cpus) * world_size < online)
+        fprintf(stderr, "radpt: note: each of the %d ranks may use %d of this machine's %ld cores (mpirun "
+                        "binds ranks to cores); mpirun --bind-to none lets threads use the rest\n",
+                world_size, CPU_COUNT(&cpus), online);
     if (world_rank != 0) {
         rp_files_discard(1);
         fflush(NULL);
