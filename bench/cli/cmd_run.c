@@ -461,8 +461,10 @@ int rp_cmd_render(int argc, char **argv)
         /* split over ranks: the largest rank's memory (make bench-mpi) */
         double mem[2] = {tot.last.memory / 1048576.0, rp_peak_rss_mb()};
         rp_comm_max(rp_solver_comm(solver), mem, 2);
-        printf(", %d ranks (per rank at most: %.1f MiB held by the method, peak RSS %.1f MiB)", rp_mpi_size(),
-               mem[0], mem[1]);
+        printf(", %d ranks (per rank at most:", rp_mpi_size());
+        if (mem[0] > 0)
+            printf(" %.1f MiB held by the method,", mem[0]);
+        printf(" peak RSS %.1f MiB)", mem[1]);
     } else if (rp_mpi_size() > 1)
         printf(", on rank 0 alone (%s does not split its work over ranks)", cli.method);
     printf("\n");
