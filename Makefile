@@ -9,6 +9,8 @@
 #   make demo     render the built-in Cornell box
 #   make bench    throughput benchmarks on the Cornell box
 #   make bench-mpi  speedup and memory per rank under Open MPI (K = 1, 2)
+#   make install [PREFIX=/usr/local] [DESTDIR=]   radpt, libradpt.so/.a,
+#                 include/radpt/, radpt.pc, radpt.1; make uninstall removes them
 #   make valgrind the demo's commands, cut down, under valgrind memcheck
 
 DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
@@ -32,9 +34,13 @@ MPI_LIBS   := $(shell pkg-config --libs ompi-c 2>/dev/null || echo -lmpi)
 OPT      ?= -O2
 SANITIZE ?=
 CPPFLAGS := -I. $(GSL_CFLAGS) -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
-CFLAGS   := -std=c11 $(OPT) -g -Wall -Wextra -Werror -fopenmp -MMD -MP $(SANITIZE)
+# -fPIC: the same objects go into libradpt.a and libradpt.so (which the
+# radpt binary and plugins share); no semantic interposition, so calls
+# inside the library stay direct.
+PIC      := -fPIC -fno-semantic-interposition
+CFLAGS   := -std=c11 $(OPT) -g -Wall -Wextra -Werror -fopenmp -MMD -MP $(PIC) $(SANITIZE)
 # CGAL is heavy to compile: no -g, one or two translation units.
-CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(SANITIZE)
+CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(PIC) $(SANITIZE)
 LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng $(GSL_LIBS) $(MPI_LIBS) \
             -lgmp -lmpfr -lstdc++ -lm
 LDFLAGS  := -fopenmp $(SANITIZE)
@@ -57,18 +63,29 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off scenes/data/elephant.off scenes/data/armadillo.off
 
-.PHONY: all deps test check asan demo bench bench-mpi clean meshes fuzz fuzz-deps valgrind format
+.PHONY: all deps test check asan demo bench bench-mpi install uninstall clean meshes fuzz fuzz-deps valgrind format
 all: radpt meshes
 
 radpt: $(BUILD)/radpt
 	cp $< $@
 
-$(BUILD)/radpt: $(CLI_OBJ) $(BUILD)/libradpt.a
-	$(CC) $(LDFLAGS) -o $@ $^ $(LDLIBS)
+# The radpt binary links libradpt.so, found beside it ($$ORIGIN: build/,
+# build-asan/) or under build/ (the copy ./radpt); the installed one is
+# relinked to find it in ../lib (make install).  Plugins resolve radpt's
+# functions against that same loaded library.
+SONAME  := libradpt.so.0
+SOREAL  := libradpt.so.$(VERSION)
+$(BUILD)/radpt: $(CLI_OBJ) $(BUILD)/$(SOREAL)
+	$(CC) $(LDFLAGS) -o $@ $(CLI_OBJ) -L$(BUILD) -lradpt -Wl,-rpath,'$$ORIGIN:$$ORIGIN/$(BUILD)' $(LDLIBS)
 
 $(BUILD)/libradpt.a: $(LIB_OBJ)
 	rm -f $@
 	ar rcs $@ $^
+
+$(BUILD)/$(SOREAL): $(LIB_OBJ)
+	$(CC) $(LDFLAGS) -shared -Wl,-soname,$(SONAME) -Wl,-Bsymbolic-functions -o $@ $^ $(LDLIBS)
+	ln -sf $(SOREAL) $(BUILD)/$(SONAME)
+	ln -sf $(SONAME) $(BUILD)/libradpt.so
 
 $(BUILD)/%.o: %.c
 	@mkdir -p $(dir $@)
@@ -82,6 +99,7 @@ $(BUILD)/tests/run: $(TEST_OBJ) $(BUILD)/libradpt.a
 	$(CC) $(LDFLAGS) -o $@ $^ -lcriterion $(LDLIBS)
 
 $(BUILD)/bench/run/mpi.o: CPPFLAGS += $(MPI_CFLAGS)
+$(BUILD)/bench/run/plugin.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"'
 $(BUILD)/bench/cli/main.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"' -DRP_GIT_DESCRIBE='"$(GIT_DESCRIBE)"'
 $(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"'
 
@@ -143,6 +161,55 @@ bench: deps
 bench-mpi: deps
 	@$(MAKE) --no-print-directory radpt meshes
 	bench/mpi.sh
+
+# ------------------------------------------------------------ install
+# What is installed (and all that uninstall removes): bin/radpt (relinked
+# to find lib/libradpt.so.0 as $$ORIGIN/../lib), lib/libradpt.so.VERSION with
+# its soname and dev links, lib/libradpt.a, the public headers under
+# include/radpt/ (include/radpt/radpt.h and the geometry/ and solvers/
+# headers it includes), lib/pkgconfig/radpt.pc, share/man/man1/radpt.1.
+PREFIX  ?= /usr/local
+DESTDIR ?=
+LIBDIR  := $(PREFIX)/lib
+INCDIR  := $(PREFIX)/include/radpt
+PUBLIC_GEOMETRY := vec.h status.h scene.h mesh.h raycast.h sample.h camera.h
+PUBLIC_SOLVERS  := comm.h solver.h plugin.h
+INSTALLED := $(PREFIX)/bin/radpt $(LIBDIR)/$(SOREAL) $(LIBDIR)/$(SONAME) $(LIBDIR)/libradpt.so \
+             $(LIBDIR)/libradpt.a $(LIBDIR)/pkgconfig/radpt.pc $(PREFIX)/share/man/man1/radpt.1 \
+             $(INCDIR)/radpt.h $(PUBLIC_GEOMETRY:%=$(INCDIR)/geometry/%) $(PUBLIC_SOLVERS:%=$(INCDIR)/solvers/%)
+
+$(BUILD)/radpt-installed: $(CLI_OBJ) $(BUILD)/$(SOREAL)
+	$(CC) $(LDFLAGS) -o $@ $(CLI_OBJ) -L$(BUILD) -lradpt -Wl,-rpath,'$$ORIGIN/../lib' $(LDLIBS)
+
+$(BUILD)/radpt.pc: Makefile
+	@printf '%s\n' 'prefix=$(PREFIX)' 'libdir=$${prefix}/lib' 'includedir=$${prefix}/include' '' \
+	    'Name: radpt' \
+	    'Description: radiosity and path tracing compared: the solver interface, scene and ray queries, plugins' \
+	    'Version: $(VERSION)' 'Cflags: -I$${includedir}' 'Libs: -L$${libdir} -lradpt -lm' \
+	    'Libs.private: $(LDLIBS)' > $@
+
+$(BUILD)/radpt.1: $(BUILD)/radpt bench/manpage.sh
+	bench/manpage.sh $(BUILD)/radpt $(VERSION) > $@
+
+install: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD)/radpt.pc $(BUILD)/radpt.1
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/share/man/man1 \
+	    $(DESTDIR)$(INCDIR)/geometry $(DESTDIR)$(INCDIR)/solvers
+	install -m 755 $(BUILD)/radpt-installed $(DESTDIR)$(PREFIX)/bin/radpt
+	install -m 755 $(BUILD)/$(SOREAL) $(DESTDIR)$(LIBDIR)/$(SOREAL)
+	ln -sf $(SOREAL) $(DESTDIR)$(LIBDIR)/$(SONAME)
+	ln -sf $(SONAME) $(DESTDIR)$(LIBDIR)/libradpt.so
+	install -m 644 $(BUILD)/libradpt.a $(DESTDIR)$(LIBDIR)/libradpt.a
+	install -m 644 $(BUILD)/radpt.pc $(DESTDIR)$(LIBDIR)/pkgconfig/radpt.pc
+	install -m 644 $(BUILD)/radpt.1 $(DESTDIR)$(PREFIX)/share/man/man1/radpt.1
+	install -m 644 include/radpt/radpt.h $(DESTDIR)$(INCDIR)/radpt.h
+	install -m 644 $(PUBLIC_GEOMETRY:%=geometry/%) $(DESTDIR)$(INCDIR)/geometry/
+	install -m 644 $(PUBLIC_SOLVERS:%=solvers/%) $(DESTDIR)$(INCDIR)/solvers/
+
+uninstall:
+	rm -f $(INSTALLED:%=$(DESTDIR)%)
+	-rmdir $(DESTDIR)$(INCDIR)/geometry $(DESTDIR)$(INCDIR)/solvers $(DESTDIR)$(INCDIR) 2>/dev/null
+	-rmdir -p $(DESTDIR)$(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/share/man/man1 $(DESTDIR)$(PREFIX)/bin \
+	    $(DESTDIR)$(PREFIX)/include 2>/dev/null
 
 # Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
 # for FUZZ_SECONDS; new corpus entries land in tests/fuzz/<target>/.

@@ -19,3 +19,18 @@ rp_vec3 rp_camera_direction(const rp_camera_frame *f, double x, double y)
     rp_vec3 d = rp_v3_add(f->forward, rp_v3_add(rp_v3_scale(f->right, sx), rp_v3_scale(f->up, sy)));
     return rp_v3_normalize(d);
 }
+
+int rp_camera_project(const rp_camera_frame *f, rp_vec3 p, double *x, double *y, double *cos_theta)
+{
+    rp_vec3 d = rp_v3_sub(p, f->eye);
+    double z = rp_v3_dot(d, f->forward);
+    double len = rp_v3_length(d);
+    if (!(z > 0) || !(len > 0))
+        return 0;
+    /* rp_camera_direction's sx, sy at unit distance along forward */
+    double sx = rp_v3_dot(d, f->right) / z, sy = rp_v3_dot(d, f->up) / z;
+    *x = (sx / (f->tan_half * f->aspect) + 1.0) * 0.5 * f->width;
+    *y = (1.0 - sy / f->tan_half) * 0.5 * f->height;
+    *cos_theta = z / len;
+    return *x >= 0 && *x < f->width && *y >= 0 && *y < f->height;
+}

@@ -14,6 +14,10 @@
 
 #include "scene.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 typedef struct rp_mesh rp_mesh;
 
 typedef struct rp_mesh_params {
@@ -82,5 +86,9 @@ uint32_t rp_mesh_locate(const rp_mesh *mesh, uint32_t face, rp_vec3 p);
 void rp_mesh_element_weights(const rp_mesh *mesh, uint32_t e, rp_vec3 p, double w[4]);
 
 void rp_mesh_quality_get(const rp_mesh *mesh, rp_mesh_quality *q);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

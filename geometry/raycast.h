@@ -15,6 +15,10 @@
 #include "mesh.h"
 #include "scene.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 typedef struct rp_raycast rp_raycast;
 
 typedef struct rp_hit {
@@ -84,5 +88,9 @@ void rp_ray_closest_n(const rp_raycast *rc, size_t n, const rp_vec3 *o, const rp
 
 /* Counts of rays cast so far are the caller's business (rays are cheap to
  * count where they are cast). */
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

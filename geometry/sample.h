@@ -10,6 +10,10 @@
 
 #include "scene.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 typedef struct rp_area_sampler rp_area_sampler;
 
 typedef enum rp_area_weight {
@@ -43,5 +47,9 @@ double rp_area_sampler_pdf(const rp_area_sampler *s, uint32_t face);
 
 /* A uniform point on one face from (u1, u2) in [0, 1)^2. */
 rp_vec3 rp_face_sample_uniform(const rp_scene *scene, uint32_t face, double u1, double u2);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

@@ -16,6 +16,10 @@
 #include "status.h"
 #include "vec.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 #define RP_NONE UINT32_MAX
 
 typedef struct rp_scene rp_scene;
@@ -146,5 +150,9 @@ int rp_scene_is_closed(const rp_scene *scene);
  * p = v0 + u (v1 - v0) + v (v2 - v0); for quads the bilinear patch
  * p = (1-u)(1-v) v0 + u(1-v) v1 + uv v2 + (1-u)v v3. */
 rp_vec3 rp_scene_face_point(const rp_scene *scene, uint32_t face, double u, double v);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

@@ -8,6 +8,10 @@
 
 #include <stddef.h>
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 typedef enum rp_status {
     RP_OK = 0,
     RP_ERR_INPUT,       /* bad input: scene, mesh file, option (exit 2) */
@@ -36,5 +40,9 @@ int rp_status_exit_code(rp_status status);
 
 /* A short name for a status ("bad input", "out of memory", ...). */
 const char *rp_status_string(rp_status status);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

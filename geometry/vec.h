@@ -4,6 +4,10 @@
 
 #include <math.h>
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 #define RP_PI 3.14159265358979323846
 
 typedef struct rp_vec3 {
@@ -43,5 +47,9 @@ static inline void rp_v3_basis(rp_vec3 n, rp_vec3 *t, rp_vec3 *b)
     *t = rp_v3(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x);
     *b = rp_v3(c, sign + n.y * n.y * a, -n.y);
 }
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

@@ -16,6 +16,10 @@
 
 #include <stddef.h>
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 typedef struct rp_comm rp_comm;
 struct rp_comm {
     int rank, size;
@@ -64,5 +68,9 @@ static inline int rp_comm_owns(const rp_comm *c, size_t index)
 {
     return !c || c->size <= 1 || (int)(index % (size_t)c->size) == c->rank;
 }
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

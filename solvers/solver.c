@@ -349,3 +349,8 @@ const char *rp_solver_samples_name(const rp_solver_type *type)
 {
     return type->samples_name ? type->samples_name : type->iteration_name ? type->iteration_name : "iterations";
 }
+
+int rp_options_cancelled(const rp_options *o)
+{
+    return o && rp_cancelled(o->cancel);
+}

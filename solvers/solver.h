@@ -8,14 +8,20 @@
 #ifndef RP_SOLVER_H
 #define RP_SOLVER_H
 
-#include <stdatomic.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
+#ifndef __cplusplus
+#include <stdatomic.h>
+#endif
 
 #include "../geometry/scene.h"
 #include "../geometry/status.h"
 #include "comm.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
 
 /* What the harness wants answered. */
 enum {
@@ -32,6 +38,14 @@ typedef struct rp_option_spec {
 } rp_option_spec;
 
 typedef void (*rp_log_fn)(void *ctx, const char *message);
+
+/* The cancel flag is a C11 atomic_int; C++ before C++23 has no
+ * <stdatomic.h>, so there it is opaque: test it with rp_options_cancelled. */
+#ifdef __cplusplus
+#define RP_CANCEL_FLAG void
+#else
+#define RP_CANCEL_FLAG atomic_int
+#endif
 
 typedef struct rp_options {
     size_t size;          /* sizeof(rp_options), so the struct can grow */
@@ -54,7 +68,7 @@ typedef struct rp_options {
      * step (per row, per shot, per block: within a second or so), and
      * return RP_ERR_INTERRUPTED when they stop for it; the state is then
      * only good for fini. */
-    const atomic_int *cancel;
+    const RP_CANCEL_FLAG *cancel;
     /* The method's option specs, set by rp_solver_create (a caller of a
      * type's init must set them as it does): an option absent
      * from keys takes its spec's `fallback` in rp_options_double and
@@ -67,11 +81,15 @@ typedef struct rp_options {
     const rp_comm *comm;
 } rp_options;
 
+#ifndef __cplusplus
 /* 1 once cancellation has been asked for (cancel may be NULL). */
 static inline int rp_cancelled(const atomic_int *cancel)
 {
     return cancel && atomic_load_explicit(cancel, memory_order_relaxed) != 0;
 }
+#endif
+/* The same for a method's options, from C or C++ (o may be NULL). */
+int rp_options_cancelled(const rp_options *o);
 
 /* Work done by one step (added up by the harness). */
 typedef struct rp_step_info {
@@ -153,8 +171,12 @@ const char *rp_solver_samples_name(const rp_solver_type *type);
 typedef struct rp_solver rp_solver;
 
 const rp_solver_type *rp_solver_lookup(const char *name);
-/* NULL-terminated list of every registered type. */
+/* NULL-terminated list of every registered type: the built-in ones, then
+ * those registered at run time. */
 const rp_solver_type *const *rp_solver_types(void);
+/* Adds a method (a plugin's, solvers/plugin.h); its name must be new and
+ * of a-z, 0-9, '-', '_'.  Not thread-safe: register before running. */
+rp_status rp_solver_register(const rp_solver_type *type, rp_error *err);
 
 rp_status rp_solver_create(const rp_solver_type *type, const rp_scene *scene,
                            const rp_options *options, rp_solver **out, rp_error *err);
@@ -218,5 +240,9 @@ rp_status rp_options_check(const rp_options *o, const rp_solver_type *type, rp_e
      "1e-5"}
 struct rp_raycast;
 rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_error *err);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif

@@ -7,6 +7,7 @@
 #include "bench/cli/commands.h"
 #include "bench/experiments/experiments.h"
 #include "bench/run/mpi.h"
+#include "bench/run/plugin.h"
 
 #ifndef RP_VERSION
 #define RP_VERSION "unknown"
@@ -192,11 +193,48 @@ static int dispatch(int argc, char **argv)
     return 2;
 }
 
+/* Loads RADPT_PLUGIN_PATH's plugins, then each --plugin PATH (or
+ * --plugin=PATH) of the command line, which it removes from argv: a
+ * plugin's methods are then known to every command, `help METHOD`
+ * included.  Returns 0, or 2 after the message. */
+static int load_plugins(int *argc, char **argv)
+{
+    rp_error err;
+    if (rp_plugin_load_env(&err) != RP_OK) {
+        fprintf(stderr, "radpt: %s\n", err.message);
+        return 2;
+    }
+    int out = 1;
+    for (int i = 1; i < *argc; i++) {
+        const char *path = NULL;
+        if (!strcmp(argv[i], "--plugin")) {
+            if (i + 1 >= *argc) {
+                fprintf(stderr, "radpt: --plugin needs a PATH.so (see radpt help)\n");
+                return 2;
+            }
+            path = argv[++i];
+        } else if (!strncmp(argv[i], "--plugin=", 9))
+            path = argv[i] + 9;
+        if (!path) {
+            argv[out++] = argv[i];
+            continue;
+        }
+        if (rp_plugin_load(path, &err) != RP_OK) {
+            fprintf(stderr, "radpt: %s\n", err.message);
+            return 2;
+        }
+    }
+    argv[out] = NULL;
+    *argc = out;
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     gsl_set_error_handler_off();
     /* Under mpirun every rank runs the same command; plainly, no MPI. */
     if (rp_mpi_start(&argc, &argv) != 0)
         return 1;
-    return rp_mpi_finish(dispatch(argc, argv));
+    int rc = load_plugins(&argc, argv);
+    return rp_mpi_finish(rc ? rc : dispatch(argc, argv));
 }
