@@ -63,7 +63,7 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off scenes/data/elephant.off scenes/data/armadillo.off
 
-.PHONY: all deps test check asan demo bench bench-mpi install uninstall clean meshes fuzz fuzz-deps valgrind format
+.PHONY: all deps test check asan demo bench bench-mpi install uninstall plugins clean meshes fuzz fuzz-deps valgrind format
 all: radpt meshes
 
 radpt: $(BUILD)/radpt
@@ -101,7 +101,8 @@ $(BUILD)/tests/run: $(TEST_OBJ) $(BUILD)/libradpt.a
 $(BUILD)/bench/run/mpi.o: CPPFLAGS += $(MPI_CFLAGS)
 $(BUILD)/bench/run/plugin.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"'
 $(BUILD)/bench/cli/main.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"' -DRP_GIT_DESCRIBE='"$(GIT_DESCRIBE)"'
-$(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"'
+$(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"' \
+    -DRP_BUILD_DIR='"$(CURDIR)/$(BUILD)"'
 
 meshes: $(MESHES)
 scenes/data/%.off:
@@ -116,7 +117,7 @@ test: deps
 # Criterion runs each test in its own process; two workers for two cores.
 # `make check T=suite` runs one suite, `make check T=suite/test` one test.
 T ?=
-check: $(BUILD)/tests/run $(BUILD)/radpt meshes
+check: $(BUILD)/tests/run $(BUILD)/radpt meshes plugins
 	$(BUILD)/tests/run --jobs 2 $(if $(T),--filter '$(if $(findstring /,$(T)),$(T),$(T)/*)')
 
 # clang-format on every C, C++ and header file (style: .clang-format).
@@ -210,6 +211,18 @@ uninstall:
 	-rmdir $(DESTDIR)$(INCDIR)/geometry $(DESTDIR)$(INCDIR)/solvers $(DESTDIR)$(INCDIR) 2>/dev/null
 	-rmdir -p $(DESTDIR)$(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/share/man/man1 $(DESTDIR)$(PREFIX)/bin \
 	    $(DESTDIR)$(PREFIX)/include 2>/dev/null
+
+# The example plugins, built as a user builds them: against a DESTDIR
+# install (in $(BUILD)/stage) through pkg-config only; the tests load them
+# from $(BUILD)/plugins/ (tests/test_plugin.c).
+STAGE := $(CURDIR)/$(BUILD)/stage
+EXAMPLES := $(notdir $(wildcard examples/plugins/*))
+plugins: $(BUILD)/$(SOREAL) $(BUILD)/radpt-installed
+	@$(MAKE) --no-print-directory install DESTDIR=$(STAGE) PREFIX=/usr >/dev/null
+	@mkdir -p $(BUILD)/plugins
+	@for e in $(EXAMPLES); do \
+	    PKG_CONFIG_LIBDIR=$(STAGE)/usr/lib/pkgconfig PKG_CONFIG_SYSROOT_DIR=$(STAGE) \
+	    $(MAKE) --no-print-directory -C examples/plugins/$$e OUT=$(CURDIR)/$(BUILD)/plugins || exit 1; done
 
 # Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
 # for FUZZ_SECONDS; new corpus entries land in tests/fuzz/<target>/.

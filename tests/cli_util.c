@@ -66,6 +66,13 @@ rp_run rp_run_radpt_mpi(int ranks, const char *args)
     return run_prefixed(prefix, args);
 }
 
+rp_run rp_run_radpt_env(const char *env, const char *args)
+{
+    char prefix[1024];
+    snprintf(prefix, sizeof prefix, "env %s ", env);
+    return run_prefixed(prefix, args);
+}
+
 void rp_run_free(rp_run *r)
 {
     free(r->out);

@@ -18,6 +18,9 @@ void rp_run_free(rp_run *r);
  * core binding, -q; --allow-run-as-root when run as root, as CI is). */
 rp_run rp_run_radpt_mpi(int ranks, const char *args);
 
+/* The same with "NAME=VALUE ..." set in its environment. */
+rp_run rp_run_radpt_env(const char *env, const char *args);
+
 /* The number in a JSON object following "key": after the first occurrence
  * of anchor (a string that must occur in text); NAN if absent. */
 double rp_json_number_after(const char *text, const char *anchor, const char *key);
