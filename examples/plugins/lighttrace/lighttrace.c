@@ -71,6 +71,9 @@ RP_PLUGIN_DECLARE_ABI;
 #define LT_MAX_BANDS 256
 /* Particles per work item: partial sums per chunk, added in chunk order. */
 #define LT_CHUNK 1024
+/* Chunks traced in parallel before their sums are added: bounds the
+ * memory of partial sums and splat lists whatever --particles is. */
+#define LT_WAVE 64
 /* Russian roulette survival is capped so that a particle in a white
  * closed room still ends (its flux then grows by 1/0.95 per reflection). */
 #define LT_RR_MAX 0.95
@@ -113,7 +116,7 @@ typedef struct lt_state {
     /* Image: per pixel and band, sums of Y and Y^2; per chunk, splats. */
     double *isum, *isumsq;
     lt_splats *splats;
-    size_t nchunks;           /* allocated entries of partial and splats */
+    size_t nchunks;           /* entries of partial and splats: one wave's chunks */
 
     uint64_t done;            /* particles traced */
     unsigned long steps;
@@ -288,6 +291,7 @@ static rp_status lt_init(void *state, const rp_scene *scene, const rp_options *o
             return rp_error_set(err, RP_ERR_NOMEM, "lighttrace: out of memory");
     }
     s->nchunks = (s->particles + LT_CHUNK - 1) / LT_CHUNK;
+    s->nchunks = s->nchunks < LT_WAVE ? s->nchunks : LT_WAVE;
     s->splats = calloc(s->nchunks, sizeof *s->splats);
     if (!s->splats)
         return rp_error_set(err, RP_ERR_NOMEM, "lighttrace: out of memory");
@@ -468,111 +472,114 @@ static inline int lt_nthreads(const lt_state *s)
 #endif
 }
 
+/* Particles [first, first + count) of the run: chunks of LT_CHUNK in
+ * parallel, then their sums in chunk order.  Returns 0 when out of memory;
+ * *cancelled is set when the caller asked to stop. */
+static int lt_wave(lt_state *s, uint64_t first, uint64_t count, unsigned long long *rays_out, int *cancelled)
+{
+    const size_t nb = s->nbands, ns = s->nsurfaces;
+    const int surfaces = (s->want & RP_WANT_SURFACES) != 0, image = (s->want & RP_WANT_IMAGE) != 0;
+    const long nchunks = (long)((count + LT_CHUNK - 1) / LT_CHUNK);
+    unsigned long long rays = 0;
+    int nomem = 0;
+
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(lt_nthreads(s)) schedule(dynamic, 1) reduction(+ : rays)
+#endif
+    for (long c = 0; c < nchunks; c++) {
+        double *psum = surfaces ? s->partial + (size_t)c * 2 * ns * nb : NULL;
+        double *psq = psum ? psum + ns * nb : NULL;
+        lt_splats *sp = image ? &s->splats[c] : NULL;
+        if (sp)
+            sp->n = 0;
+        if (psum)
+            memset(psum, 0, 2 * ns * nb * sizeof *psum);
+        lt_scratch sc = {0};
+        if (surfaces) {
+            sc.X = malloc((ns * nb + 1) * sizeof *sc.X);
+            sc.touched = malloc((ns + 1) * sizeof *sc.touched);
+            sc.mark = calloc(ns + 1, 1);
+        }
+        int ok = !surfaces || (sc.X && sc.touched && sc.mark);
+        uint64_t k0 = (uint64_t)c * LT_CHUNK, k1 = k0 + LT_CHUNK < count ? k0 + LT_CHUNK : count;
+        for (uint64_t k = k0; ok && k < k1; k++) {
+            size_t mark = sp ? sp->n : 0;
+            if (!lt_particle(s, first + k, surfaces ? &sc : NULL, sp, &rays)) {
+                ok = 0;
+                break;
+            }
+            if (sp)
+                lt_splats_merge(sp, mark, nb);
+            for (size_t t = 0; t < sc.ntouched; t++) {
+                uint32_t su = sc.touched[t];
+                for (size_t b = 0; b < nb; b++) {
+                    double x = sc.X[su * nb + b];
+                    psum[su * nb + b] += x;
+                    psq[su * nb + b] += x * x;
+                }
+                sc.mark[su] = 0;
+            }
+            sc.ntouched = 0;
+        }
+        if (!ok) {
+#ifdef _OPENMP
+#pragma omp atomic write
+#endif
+            nomem = 1;
+        }
+        free(sc.X);
+        free(sc.touched);
+        free(sc.mark);
+    }
+    *rays_out += rays;
+    if (nomem)
+        return 0;
+    if (rp_options_cancelled(&s->poll)) {
+        *cancelled = 1;
+        return 1;
+    }
+    /* Chunk order: the same sums for any thread count. */
+    for (size_t c = 0; c < (size_t)nchunks; c++) {
+        if (surfaces) {
+            const double *psum = s->partial + c * 2 * ns * nb, *psq = psum + ns * nb;
+            for (size_t i = 0; i < ns * nb; i++) {
+                s->ssum[i] += psum[i];
+                s->ssumsq[i] += psq[i];
+            }
+        }
+        if (image) {
+            const lt_splats *sp = &s->splats[c];
+            for (size_t i = 0; i < sp->n; i++) {
+                double *sum = s->isum + (size_t)sp->pixel[i] * nb, *sq = s->isumsq + (size_t)sp->pixel[i] * nb;
+                const double *v = sp->value + i * nb;
+                for (size_t b = 0; b < nb; b++) {
+                    sum[b] += v[b];
+                    sq[b] += v[b] * v[b];
+                }
+            }
+        }
+    }
+    return 1;
+}
+
+/* One step: `particles` particles, in waves of at most LT_WAVE chunks (the
+ * memory for partial sums and splats is the wave's), polling for
+ * cancellation between waves (a cancelled state is only good for fini). */
 static rp_status lt_step(void *state, rp_step_info *info, rp_error *err)
 {
     lt_state *s = state;
     const size_t nb = s->nbands, ns = s->nsurfaces;
-    const long nchunks = (long)s->nchunks;
-    const int surfaces = (s->want & RP_WANT_SURFACES) != 0, image = (s->want & RP_WANT_IMAGE) != 0;
-    const uint64_t first = s->done;
     unsigned long long rays = 0;
-    int nomem = 0, cancelled = 0;
-
-    if (s->lights) {
-#ifdef _OPENMP
-#pragma omp parallel for num_threads(lt_nthreads(s)) schedule(dynamic, 1) reduction(+ : rays)
-#endif
-        for (long c = 0; c < nchunks; c++) {
-            double *psum = surfaces ? s->partial + (size_t)c * 2 * ns * nb : NULL;
-            lt_splats *sp = image ? &s->splats[c] : NULL;
-            if (sp)
-                sp->n = 0;
-            if (psum)
-                memset(psum, 0, 2 * ns * nb * sizeof *psum);
-            int stop;
-#ifdef _OPENMP
-#pragma omp atomic read
-#endif
-            stop = cancelled;
-            if (stop || rp_options_cancelled(&s->poll)) {
-#ifdef _OPENMP
-#pragma omp atomic write
-#endif
-                cancelled = 1;
-                continue;
-            }
-            lt_scratch sc = {0};
-            if (surfaces) {
-                sc.X = malloc((ns * nb + 1) * sizeof *sc.X);
-                sc.touched = malloc((ns + 1) * sizeof *sc.touched);
-                sc.mark = calloc(ns + 1, 1);
-                if (!sc.X || !sc.touched || !sc.mark) {
-#ifdef _OPENMP
-#pragma omp atomic write
-#endif
-                    nomem = 1;
-                    free(sc.X);
-                    free(sc.touched);
-                    free(sc.mark);
-                    continue;
-                }
-            }
-            double *psq = psum ? psum + ns * nb : NULL;
-            uint64_t k0 = (uint64_t)c * LT_CHUNK, k1 = k0 + LT_CHUNK < s->particles ? k0 + LT_CHUNK : s->particles;
-            for (uint64_t k = k0; k < k1; k++) {
-                size_t mark = sp ? sp->n : 0;
-                if (!lt_particle(s, first + k, surfaces ? &sc : NULL, sp, &rays)) {
-#ifdef _OPENMP
-#pragma omp atomic write
-#endif
-                    nomem = 1;
-                    break;
-                }
-                if (sp)
-                    lt_splats_merge(sp, mark, nb);
-                for (size_t t = 0; t < sc.ntouched; t++) {
-                    uint32_t su = sc.touched[t];
-                    for (size_t b = 0; b < nb; b++) {
-                        double x = sc.X[su * nb + b];
-                        psum[su * nb + b] += x;
-                        psq[su * nb + b] += x * x;
-                    }
-                    sc.mark[su] = 0;
-                }
-                sc.ntouched = 0;
-            }
-            free(sc.X);
-            free(sc.touched);
-            free(sc.mark);
+    int cancelled = 0;
+    const uint64_t wave = (uint64_t)LT_WAVE * LT_CHUNK;
+    if (s->lights)
+        for (uint64_t k = 0; k < s->particles && !cancelled; k += wave) {
+            uint64_t count = s->particles - k < wave ? s->particles - k : wave;
+            if (!lt_wave(s, s->done + k, count, &rays, &cancelled))
+                return rp_error_set(err, RP_ERR_NOMEM, "lighttrace: out of memory (splats)");
         }
-    }
-    if (nomem)
-        return rp_error_set(err, RP_ERR_NOMEM, "lighttrace: out of memory (splats)");
     if (cancelled)
         return rp_error_set(err, RP_ERR_INTERRUPTED, "lighttrace: interrupted");
-
-    /* Chunk order: the same sums for any thread count. */
-    if (s->lights)
-        for (size_t c = 0; c < s->nchunks; c++) {
-            if (surfaces) {
-                const double *psum = s->partial + c * 2 * ns * nb, *psq = psum + ns * nb;
-                for (size_t i = 0; i < ns * nb; i++) {
-                    s->ssum[i] += psum[i];
-                    s->ssumsq[i] += psq[i];
-                }
-            }
-            if (image) {
-                const lt_splats *sp = &s->splats[c];
-                for (size_t i = 0; i < sp->n; i++) {
-                    double *sum = s->isum + (size_t)sp->pixel[i] * nb, *sq = s->isumsq + (size_t)sp->pixel[i] * nb;
-                    const double *v = sp->value + i * nb;
-                    for (size_t b = 0; b < nb; b++) {
-                        sum[b] += v[b];
-                        sq[b] += v[b] * v[b];
-                    }
-                }
-            }
-        }
     s->done += s->particles;
     s->steps++;
     info->rays += (double)rays;
@@ -583,9 +590,9 @@ static rp_status lt_step(void *state, rp_step_info *info, rp_error *err)
     double mem = (double)(s->nchunks * sizeof *s->splats);
     for (size_t c = 0; c < s->nchunks; c++)
         mem += (double)s->splats[c].cap * (sizeof(uint32_t) + nb * sizeof(double));
-    if (image)
+    if (s->want & RP_WANT_IMAGE)
         mem += 2.0 * s->cam.width * s->cam.height * nb * sizeof(double);
-    if (surfaces)
+    if (s->want & RP_WANT_SURFACES)
         mem += (2.0 + 2.0 * (double)s->nchunks) * ns * nb * sizeof(double);
     info->memory = mem;
     return RP_OK;
