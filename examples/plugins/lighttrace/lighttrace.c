@@ -52,7 +52,7 @@
  * order, so the answer is bit-identical for any thread count.
  *
  * Build against an installed radpt (make install), see the Makefile:
- *     make PKG_CONFIG_PATH=PREFIX/lib/pkgconfig
+ *     PKG_CONFIG_PATH=PREFIX/lib/pkgconfig make
  * and run it:
  *     radpt render scenes/cornell.scene --plugin ./lighttrace.so --method lighttrace -o lt.exr
  *     radpt probe scenes/cornell.scene --plugin ./lighttrace.so --method lighttrace --surface-averages */
