@@ -462,15 +462,12 @@ static int lt_particle(const lt_state *s, uint64_t index, lt_scratch *sc, lt_spl
     return 1;
 }
 
+#ifdef _OPENMP
 static inline int lt_nthreads(const lt_state *s)
 {
-#ifdef _OPENMP
     return s->threads > 0 ? s->threads : omp_get_max_threads();
-#else
-    (void)s;
-    return 1;
-#endif
 }
+#endif
 
 /* Particles [first, first + count) of the run: chunks of LT_CHUNK in
  * parallel, then their sums in chunk order.  Returns 0 when out of memory;
