@@ -4,7 +4,8 @@
  * Method: Arvo & Kirk, "Particle transport and image synthesis" (SIGGRAPH
  * 1990); Dutré, Bala & Bekaert, "Advanced Global Illumination" (2nd ed.,
  * 2006), ch. 5 (particle tracing, light tracing); Veach's thesis (1997),
- * sec. 10.2 for the splat to a pinhole camera.  Surfaces are one-sided
+ * ch. 10 (light subpaths joined to the eye, bidirectional path tracing's
+ * t = 1 strategies) for the splat to a pinhole camera.  Surfaces are one-sided
  * Lambertian reflectors, BRDF rho/pi; the back of a face absorbs.
  *
  * A particle starts at a point x0 on an emitting face, picked by emitted
@@ -21,6 +22,8 @@
  * probability q = min(0.95, max_b rho_b) and then carries Phi rho_b / q
  * (Arvo & Kirk 1990), which keeps every estimate unbiased.
  *
+ * Vertices x_k with k > max-depth are not counted (k = 0 is emission).
+ *
  * Surface averages.  For N particles, Phi_in,s = (1/N) sum_i X_i,s with
  * X_i,s = sum of Phi_k over the hits of particle i on surface s is an
  * unbiased estimate of the flux incident on the front of s, so
@@ -29,15 +32,16 @@
  *
  * is an unbiased estimate of the area-averaged outgoing radiance of s, and
  * its standard error is rho_s / (pi A_s) sqrt(var(X_s) / N), var the sample
- * variance over particles (sums of X and X^2 per surface).
+ * variance over particles (sums of X and X^2 per surface); a surface that
+ * reflects nothing (a pure emitter) gets Le exactly, standard error 0.
  *
  * Image.  Every vertex (the emitter's x0 included) is connected to the eye
  * by a visibility ray.  Pixel j's value is the mean radiance over its
  * image-plane area (the box filter of the path tracer's camera rays), i.e.
  * the measurement I_j = int_A W_j(x) L(x -> eye) G(x, eye) dA with, for a
  * pinhole at unit image distance, W_j G = cos_x / (r^2 A_pix cos_c^3),
- * A_pix = 4 tan(fov/2)^2 aspect / (W H) and cos_c the angle to the camera
- * axis (geometry/camera.h: the importance W H / (4 tan^2 aspect cos_c^4)
+ * A_pix = 4 tan(fov/2)^2 aspect / (W H) and cos_c the cosine of the angle
+ * to the camera axis (geometry/camera.h: the importance W H / (4 tan^2 aspect cos_c^4)
  * times cos_c).  So a vertex splats into the pixel it projects to
  *
  *     Y_b = Phi_k,b f_b cos_x / (r^2 A_pix cos_c^3),
