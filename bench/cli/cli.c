@@ -378,3 +378,16 @@ const char *rp_cli_name(const char *name, char *buf, size_t len)
     buf[n] = '\0';
     return buf;
 }
+
+static char plugin_args[4096];
+
+void rp_cli_add_plugin(const char *path)
+{
+    size_t used = strlen(plugin_args);
+    snprintf(plugin_args + used, sizeof plugin_args - used, " --plugin %s", path);
+}
+
+const char *rp_cli_plugins(void)
+{
+    return plugin_args;
+}

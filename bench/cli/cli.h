@@ -89,4 +89,10 @@ void rp_progress_end(rp_progress *p);
  * buf. */
 const char *rp_cli_name(const char *name, char *buf, size_t len);
 
+/* " --plugin PATH ..." for each plugin loaded from the command line (main
+ * removes them from argv), so that commands a report prints can be rerun;
+ * "" when none. */
+void rp_cli_add_plugin(const char *path);
+const char *rp_cli_plugins(void);
+
 #endif

@@ -141,6 +141,8 @@ static void command_line(int argc, char **argv, char *buf, size_t n)
     buf[0] = '\0';
     for (int i = 0; i < argc && used < n; i++)
         used += (size_t)snprintf(buf + used, n - used, "%s%s", i ? " " : "", i == 0 ? "radpt" : argv[i]);
+    if (used < n)
+        snprintf(buf + used, n - used, "%s", rp_cli_plugins()); /* main took them out of argv */
 }
 
 /* ------------------------------------------------------------- studies */

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "solvers/solver.h"
+#include "bench/cli/cli.h"
 #include "bench/cli/commands.h"
 #include "bench/experiments/experiments.h"
 #include "bench/run/mpi.h"
@@ -226,6 +227,7 @@ static int load_plugins(int *argc, char **argv)
             fprintf(stderr, "radpt: %s\n", err.message);
             return 2;
         }
+        rp_cli_add_plugin(path);
     }
     argv[out] = NULL;
     *argc = out;
