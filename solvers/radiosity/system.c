@@ -524,28 +524,19 @@ static int rad_fill_pairs(rp_rad_system *s, double *rays_out, double *ff_out)
     return stop;
 }
 
-/* The rank that computes the pair {i, j} of rows owned by different
- * ranks: one of the two owners, alternating in a pattern with no
- * relation to the pair's geometry, so each rank gets about half of the
- * pairs it shares with another. */
-static int rad_pair_rank(const rp_rad_system *s, size_t i, size_t j)
-{
-    const size_t K = (size_t)rp_comm_size(s->comm);
-    size_t lo = i < j ? i : j, hi = i < j ? j : i;
-    return (int)((((lo / K) + (hi / K)) & 1 ? lo : hi) % K);
-}
-
 /* Exchange buffer per chunk of rows (doubles). */
 #define RAD_XCHG_BYTES ((size_t)32 << 20)
 
 /* The dense matrix split over ranks: this rank's rows, each pair computed
- * once over all ranks.  Pairs of two rows of this rank are computed here
- * from the primary side, writing both entries (as rad_fill_pairs does
- * alone).  A pair of rows of two ranks is computed by one of them
- * (rad_pair_rank), which keeps its entry and sends the mirrored one: the
- * sends for a chunk of rows go through one rp_comm_sum of a chunk x n
- * buffer where each entry has one sender (exact), so the receiver stores
- * the float the sender computed.  A pair's value depends only on (seed,
+ * once over all ranks, by the owner of its primary side (rp_ff_primary),
+ * as rad_fill_pairs does alone: row i computes the pairs it is primary
+ * for and writes F_ij and F_ji, the latter into this rank's row j or, when
+ * another rank owns row j, into the exchange buffer.  (Computing a pair
+ * from the other side would cost more: the far-pair rules keep terms per
+ * receiver, formfactor.c.)  Round robin spreads the rows, hence the
+ * primary pairs, evenly.  The columns j go by chunks, each chunk's sends
+ * through one rp_comm_sum of a chunk x n buffer where each entry has one
+ * sender (exact), so the receiver stores the float the sender computed.  A pair's value depends only on (seed,
  * pair) (formfactor.h), so every row is bit for bit the row a single
  * process computes.  Collective: every rank runs the same chunks, and a
  * cancel on any rank stops all after the chunk.  Returns the agreed stop
@@ -603,27 +594,18 @@ static int rad_fill_split(rp_rad_system *s, double *rays_out, double *ff_out)
                 rp_ff_scratch *scr = s->scratch[omp_get_thread_num()];
                 const size_t i = rp_rad_global_row(s, (size_t)l);
                 float *row = s->F + (size_t)l * n;
-                /* i's primary pairs first (the far-pair terms per
-                 * receiver stay valid: formfactor.c), then the others */
-                for (int pass = 0; pass < 2; pass++)
-                    for (size_t j = j0; j < j1; j++) {
-                        if (j == i || rp_ff_primary(s->ff, (uint32_t)i, (uint32_t)j) != (pass == 0))
-                            continue;
-                        int shared = !rp_rad_owns(s, j);
-                        /* a pair of two own rows: from its primary side */
-                        if (!shared && pass == 1)
-                            continue;
-                        if (shared && rad_pair_rank(s, i, j) != me)
-                            continue;
-                        double fij, fji;
-                        rp_ff_pair_both(s->ff, scr, (uint32_t)i, (uint32_t)j, &fij, &fji, &rays);
-                        row[j] = (float)fij;
-                        if (shared)
-                            buf[(j - j0) * n + i] = (float)fji;
-                        else
-                            rp_rad_local_row(s, j)[i] = (float)fji;
-                        ff += 1;
-                    }
+                for (size_t j = j0; j < j1; j++) {
+                    if (j == i || !rp_ff_primary(s->ff, (uint32_t)i, (uint32_t)j))
+                        continue;
+                    double fij, fji;
+                    rp_ff_pair_both(s->ff, scr, (uint32_t)i, (uint32_t)j, &fij, &fji, &rays);
+                    row[j] = (float)fij;
+                    if (rp_rad_owns(s, j))
+                        rp_rad_local_row(s, j)[i] = (float)fji;
+                    else
+                        buf[(j - j0) * n + i] = (float)fji;
+                    ff += 1;
+                }
             }
         }
         buf[m] = stop;
@@ -632,12 +614,13 @@ static int rad_fill_split(rp_rad_system *s, double *rays_out, double *ff_out)
             stop = 1;
             break;
         }
-        /* the entries of this rank's rows in the chunk that other ranks computed */
+        /* the entries of this rank's rows in the chunk that other ranks
+         * computed: pairs whose primary side is another rank's row */
         for (size_t j = j0 + ((size_t)me + K - j0 % K) % K; j < j1; j += K) {
             float *row = rp_rad_local_row(s, j);
             const double *in = buf + (j - j0) * n;
             for (size_t i = 0; i < n; i++)
-                if (!rp_rad_owns(s, i) && rad_pair_rank(s, i, j) != me)
+                if (i != j && !rp_rad_owns(s, i) && rp_ff_primary(s->ff, (uint32_t)i, (uint32_t)j))
                     row[i] = (float)in[i];
         }
     }
