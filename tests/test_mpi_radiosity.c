@@ -187,3 +187,51 @@ Test(mpi_radiosity, dense_matrix_memory_is_split)
                   plain.memory);
     cr_expect_str_eq(split.residual, plain.residual);
 }
+
+/* The line of stderr that starts with "radpt: warning: " (malloc'd), or
+ * NULL. */
+static char *warning_line(const char *err)
+{
+    const char *p = strstr(err, "radpt: warning: ");
+    if (!p)
+        return NULL;
+    size_t n = strcspn(p, "\n");
+    char *w = malloc(n + 1);
+    memcpy(w, p, n);
+    w[n] = '\0';
+    return w;
+}
+
+Test(mpi_radiosity, row_scaling_warning_counts_every_ranks_rows)
+{
+    /* one-sample Monte Carlo form factors in a box of rho 0.95: many rows
+     * sum past 1 + RP_RAD_ROW_SUM_TOL and are scaled (tests/test_radiosity.c,
+     * bad_rows_scaled_not_refused); the warning names how many and the
+     * worst, which under a split only all ranks' rows together know */
+    char scene[64];
+    snprintf(scene, sizeof scene, "/tmp/rp_mpirad_box.%d.scene", (int)getpid());
+    FILE *f = fopen(scene, "w");
+    cr_assert_not_null(f);
+    fputs("bands grey\nmaterial m reflect 0.95 emit 1\nbox b m 0 0 0 1 1 1 inward\n", f);
+    fclose(f);
+    const char *methods[3] = {"jacobi --matrix dense", "gauss-seidel --matrix rows", "southwell --matrix dense"};
+    for (int m = 0; m < 3; m++) {
+        char args[512];
+        snprintf(args, sizeof args,
+                 "probe %s --method %s --ff montecarlo --ff-samples 1 --seed 7 --elements 150 "
+                 "--surface-averages --json --threads 1",
+                 scene, methods[m]);
+        rp_run plain = run_ranks(0, args), split = run_ranks(3, args);
+        cr_assert_eq(plain.status, 0, "%s", plain.err);
+        cr_assert_eq(split.status, 0, "%s", split.err);
+        char *a = warning_line(plain.err), *b = warning_line(split.err);
+        cr_assert_not_null(a, "%s: no warning plainly: %s", methods[m], plain.err);
+        cr_assert_not_null(b, "%s: no warning on 3 ranks: %s", methods[m], split.err);
+        cr_expect_str_eq(b, a, "%s", methods[m]);
+        free(a);
+        free(b);
+        rp_run_free(&plain);
+        rp_run_free(&split);
+    }
+    unlink(scene);
+}
