@@ -164,6 +164,15 @@ static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o
     s->batch_max = 4 * (size_t)sys->threads;
     if (s->batch_max > s->nslots / 2)
         s->batch_max = s->nslots / 2 > 0 ? s->nslots / 2 : 1;
+    if (rp_rad_split(sys)) {
+        /* The cache decides when columns are computed, hence the
+         * collectives: every rank takes the smallest cache and batch of
+         * all (their sizes follow the thread count, which may differ). */
+        double v[2] = {-(double)s->nslots, -(double)s->batch_max};
+        rp_comm_max(sys->comm, v, 2);
+        s->nslots = (size_t)-v[0];
+        s->batch_max = (size_t)-v[1];
+    }
     s->batch = malloc(s->batch_max * sizeof *s->batch);
     s->batch_slot = malloc(s->batch_max * sizeof *s->batch_slot);
     if (!s->U || !s->power || !s->reflect || !s->slot_of || !s->col_in || !s->used || !s->batch ||
