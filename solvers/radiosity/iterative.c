@@ -13,7 +13,19 @@
  * is that same product (B'' = E + rho F B'), so it costs one product per
  * sweep; Gauss-Seidel pays a second one.  Both are cheap beside the form
  * factors with a stored matrix; with rows on the fly (--matrix rows) every
- * product recomputes all n rows. */
+ * product recomputes all n rows.
+ *
+ * Split over MPI ranks (solvers/comm.h, rows round robin: system.h), each
+ * rank computes and stores only its rows of F and the products F B are
+ * summed over the ranks (one contributor per element: exact), so Jacobi
+ * is the same iteration to the last bit for any rank count.  So is
+ * Gauss-Seidel (gs_sweep_dense_split, gs_sweep_rows_split): each block
+ * of rows is updated in element order as alone, the rows' sums over the
+ * columns outside the block computed by the rows' owners in parallel and
+ * the block's own columns gathered to every rank, which then all update
+ * the block's elements the same way; only a block's rows travel, never
+ * the matrix. */
+#include <limits.h>
 #include <omp.h>
 #include <stdlib.h>
 #include <string.h>
@@ -23,7 +35,17 @@
 typedef struct it_state {
     rp_rad_system sys;
     int have_FB; /* sys.G holds F B for the current B (Jacobi) */
+    double *xbuf; /* split Gauss-Seidel: a block's rows being summed */
+    size_t xbuf_size;
 } it_state;
+
+/* Rows per block of a Gauss-Seidel sweep over the stored matrix (see
+ * gs_sweep_dense). */
+#define GS_BLOCK 256
+/* Rows per block of a split sweep with rows on the fly: a constant, not
+ * the thread count, so that every rank runs the same collectives (the
+ * system's row buffer holds at least min(n, 64) rows). */
+#define GS_ROWS_SPLIT 64
 
 static const rp_option_spec it_options[] = {
     RP_RAD_MESH_OPTIONS,
@@ -54,13 +76,28 @@ static rp_status jacobi_init(void *state, const rp_scene *scene, const rp_option
 
 static rp_status gs_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
 {
-    return it_init_common(state, scene, o, "gauss-seidel", err);
+    it_state *s = state;
+    rp_status st = it_init_common(state, scene, o, "gauss-seidel", err);
+    rp_rad_system *sys = &s->sys;
+    if (st != RP_OK || !rp_rad_split(sys))
+        return st;
+    /* dense: a block's square of F and its outer sums; rows on the fly:
+     * a block of whole rows, and two flags */
+    s->xbuf_size = sys->dense ? (size_t)GS_BLOCK * GS_BLOCK + GS_BLOCK * sys->nb
+                              : (sys->n < GS_ROWS_SPLIT ? sys->n : GS_ROWS_SPLIT) * sys->n + 2;
+    s->xbuf = malloc(s->xbuf_size * sizeof *s->xbuf);
+    if (!s->xbuf)
+        return rp_error_set(err, RP_ERR_NOMEM, "gauss-seidel: out of memory");
+    sys->bytes += s->xbuf_size * sizeof *s->xbuf;
+    return RP_OK;
 }
 
 static void it_fini(void *state)
 {
     it_state *s = state;
     rp_rad_system_fini(&s->sys);
+    free(s->xbuf);
+    s->xbuf = NULL;
 }
 
 static rp_status jacobi_step(void *state, rp_step_info *info, rp_error *err)
@@ -102,7 +139,6 @@ static inline void gs_update(rp_rad_system *sys, size_t i, const float *row)
  * parallel, then the rows are updated in order with the block's own
  * columns.  The same iteration as row-by-row Gauss-Seidel, the sums only
  * grouped differently, and all but GS_BLOCK / n of the work parallel. */
-#define GS_BLOCK 256
 
 static void gs_sweep_dense(rp_rad_system *sys)
 {
@@ -129,12 +165,134 @@ static void gs_sweep_dense(rp_rad_system *sys)
     }
 }
 
+/* gs_sweep_dense under a split, the same sums to the last bit: for each
+ * block of GS_BLOCK rows, the owners compute their rows' sums over the
+ * columns outside the block (a with the new values before it, c with the
+ * old ones after, exactly as alone), and the block's square of F and those
+ * sums are summed over the ranks (each entry from one owner: exact); then
+ * every rank updates the block's elements in order, as alone, so B stays
+ * the same on every rank.  Collective. */
+static void gs_sweep_dense_split(it_state *s)
+{
+    rp_rad_system *sys = &s->sys;
+    const size_t n = sys->n, nb = sys->nb;
+    double *B = sys->B, *x = s->xbuf;
+    float sub[GS_BLOCK];
+    for (size_t i0 = 0; i0 < n; i0 += GS_BLOCK) {
+        const size_t i1 = i0 + GS_BLOCK < n ? i0 + GS_BLOCK : n, m = i1 - i0;
+        double *P = x + m * m; /* m x nb outer sums */
+        memset(x, 0, (m * m + m * nb) * sizeof *x);
+#pragma omp parallel for num_threads(sys->threads) schedule(static)
+        for (long i = (long)i0; i < (long)i1; i++) {
+            if (!rp_rad_owns(sys, (size_t)i))
+                continue;
+            const float *row = rp_rad_local_row(sys, (size_t)i);
+            double a[RP_RAD_MAX_BANDS], c[RP_RAD_MAX_BANDS];
+            rp_rad_dot(row, B, i0, nb, a);
+            rp_rad_dot(row + i1, B + i1 * nb, n - i1, nb, c);
+            for (size_t b = 0; b < nb; b++)
+                P[((size_t)i - i0) * nb + b] = a[b] + c[b];
+            for (size_t j = 0; j < m; j++)
+                x[((size_t)i - i0) * m + j] = row[i0 + j];
+        }
+        rp_comm_sum(sys->comm, x, m * m + m * nb);
+        for (size_t i = i0; i < i1; i++) {
+            double acc[RP_RAD_MAX_BANDS];
+            for (size_t j = 0; j < m; j++)
+                sub[j] = (float)x[(i - i0) * m + j];
+            rp_rad_dot(sub, B + i0 * nb, m, nb, acc);
+            for (size_t b = 0; b < nb; b++)
+                B[i * nb + b] = sys->E[i * nb + b] + sys->rho[i * nb + b] * (P[(i - i0) * nb + b] + acc[b]);
+        }
+    }
+}
+
+/* A sweep with rows on the fly under a split, the same as alone: each
+ * block of rows is computed by the rows' owners in parallel, summed over
+ * the ranks (exact) with a cancel flag and a bad-row flag, and every rank
+ * then checks (if flagged) and applies the rows in element order as
+ * alone.  Collective; every rank returns the same status and message. */
+static rp_status gs_sweep_rows_split(it_state *s, rp_step_info *info, rp_error *err)
+{
+    rp_rad_system *sys = &s->sys;
+    const size_t n = sys->n, R = n < GS_ROWS_SPLIT ? n : GS_ROWS_SPLIT;
+    double *x = s->xbuf;
+    rp_status st;
+    for (size_t i0 = 0; i0 < n; i0 += R) {
+        const size_t i1 = i0 + R < n ? i0 + R : n, m = (i1 - i0) * n;
+        double rays = 0, ff = 0, max_sum = sys->max_row_sum;
+        int stop = 0, bad = 0;
+#pragma omp parallel for num_threads(sys->threads) schedule(dynamic, 1) reduction(+ : rays, ff) \
+    reduction(max : max_sum, bad, stop)
+        for (long i = (long)i0; i < (long)i1; i++) {
+            float *buf = sys->rowbuf + (size_t)(i - (long)i0) * n;
+            if (!rp_rad_owns(sys, (size_t)i)) {
+                memset(buf, 0, n * sizeof *buf);
+                continue;
+            }
+            if (rp_cancelled(sys->cancel)) {
+                stop = 1;
+                continue;
+            }
+            rp_rad_row(sys, (uint32_t)i, sys->scratch[omp_get_thread_num()], buf, &ff, &rays);
+            double sum;
+            if (rp_rad_check_row(sys, (uint32_t)i, buf, &sum, NULL) != RP_OK)
+                bad = 1;
+            if (sys->row_sum[i] > max_sum)
+                max_sum = sys->row_sum[i];
+        }
+        info->rays += rays;
+        info->form_factors += ff;
+        sys->max_row_sum = max_sum;
+        for (size_t k = 0; k < m; k++)
+            x[k] = sys->rowbuf[k];
+        x[m] = stop;
+        x[m + 1] = bad;
+        rp_comm_sum(sys->comm, x, m + 2);
+        if (x[m] > 0)
+            return rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted in sweep %lu", sys->name,
+                                sys->iterations + 1);
+        for (size_t k = 0; k < m; k++)
+            sys->rowbuf[k] = (float)x[k];
+        for (size_t i = i0; i < i1; i++) {
+            const float *row = sys->rowbuf + (i - i0) * n;
+            double sum;
+            /* Checked in order so the error names the first bad row. */
+            if (x[m + 1] > 0 && (st = rp_rad_check_row(sys, (uint32_t)i, row, &sum, err)) != RP_OK)
+                return st;
+            gs_update(sys, i, row);
+        }
+    }
+    rp_rad_report_scaled(sys);
+    return RP_OK;
+}
+
+/* gs_step under a split: the same sweep as alone, then the residual. */
+static rp_status gs_step_split(it_state *s, rp_step_info *info, rp_error *err)
+{
+    rp_rad_system *sys = &s->sys;
+    rp_status st;
+    if (sys->dense) {
+        if ((st = rp_rad_system_matrix(sys, info, err)) != RP_OK)
+            return st;
+        gs_sweep_dense_split(s);
+    } else if ((st = gs_sweep_rows_split(s, info, err)) != RP_OK) {
+        return st;
+    }
+    if ((st = rp_rad_matvec(sys, sys->B, sys->G, info, err)) != RP_OK)
+        return st;
+    rp_rad_step_done(sys, rp_rad_residual(sys, sys->B, sys->G), info);
+    return RP_OK;
+}
+
 static rp_status gs_step(void *state, rp_step_info *info, rp_error *err)
 {
     it_state *s = state;
     rp_rad_system *sys = &s->sys;
     const size_t n = sys->n;
     rp_status st;
+    if (rp_rad_split(sys))
+        return gs_step_split(s, info, err);
     if (sys->dense) {
         if ((st = rp_rad_system_matrix(sys, info, err)) != RP_OK)
             return st;
@@ -202,6 +360,7 @@ const rp_solver_type rp_solver_jacobi = {
     .estimate = it_estimate,
     .fini = it_fini,
     .iteration_name = "sweeps",
+    .distributed = 1,
 };
 
 const rp_solver_type rp_solver_gauss_seidel = {
@@ -214,4 +373,5 @@ const rp_solver_type rp_solver_gauss_seidel = {
     .estimate = it_estimate,
     .fini = it_fini,
     .iteration_name = "sweeps",
+    .distributed = 1,
 };

@@ -47,6 +47,13 @@
  * upper bound on the relative residual the gathering solvers report
  * exactly, at no extra form factors.
  *
+ * Split over MPI ranks (solvers/comm.h; rows round robin, system.h), the
+ * rank that owns row j computes (or, dense, stores) F_ji for its j, and
+ * the column is summed over the ranks (one contributor per entry: exact),
+ * so every rank holds the same whole column and shoots it as a single
+ * process does: the shots, hence the answers, are bit-identical for any
+ * rank count, and the dense matrix is never held whole by one rank.
+ *
  * On the fly, columns are kept in a cache of bounded size (--row-cache)
  * that evicts the column of the element with the least unshot power.  The shooting order never depends on the cache or the
  * thread count, so results are the same for any of them. */
@@ -82,6 +89,12 @@ typedef struct sw_state {
     size_t batch_max;   /* columns computed together on a miss */
     uint32_t *batch;    /* batch_max: columns computed together */
     int32_t *batch_slot;
+
+    /* Split over ranks: the columns being summed (batch_max x n, or one
+     * column when dense, + 1 for the cancel flag) and, dense, the
+     * current column. */
+    double *gather;
+    float *col;
 } sw_state;
 
 static const rp_option_spec sw_options[] = {
@@ -112,6 +125,8 @@ static void sw_fini(void *state)
     free(s->batch);
     free(s->batch_slot);
     free(s->col_scaled);
+    free(s->gather);
+    free(s->col);
     memset(s, 0, sizeof *s);
 }
 
@@ -149,6 +164,15 @@ static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o
     s->batch_max = 4 * (size_t)sys->threads;
     if (s->batch_max > s->nslots / 2)
         s->batch_max = s->nslots / 2 > 0 ? s->nslots / 2 : 1;
+    if (rp_rad_split(sys)) {
+        /* The cache decides when columns are computed, hence the
+         * collectives: every rank takes the smallest cache and batch of
+         * all (their sizes follow the thread count, which may differ). */
+        double v[2] = {-(double)s->nslots, -(double)s->batch_max};
+        rp_comm_max(sys->comm, v, 2);
+        s->nslots = (size_t)-v[0];
+        s->batch_max = (size_t)-v[1];
+    }
     s->batch = malloc(s->batch_max * sizeof *s->batch);
     s->batch_slot = malloc(s->batch_max * sizeof *s->batch_slot);
     if (!s->U || !s->power || !s->reflect || !s->slot_of || !s->col_in || !s->used || !s->batch ||
@@ -156,6 +180,14 @@ static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o
         return rp_error_set(err, RP_ERR_NOMEM, "southwell: out of memory");
     sys->bytes += 2 * n * nb * sizeof *s->U + n * (sizeof *s->power + sizeof *s->slot_of) +
                   s->nslots * (sizeof *s->col_in + sizeof *s->used);
+    if (rp_rad_split(sys)) {
+        size_t cols = sys->dense ? 1 : s->batch_max;
+        s->gather = malloc((cols * n + 1) * sizeof *s->gather);
+        s->col = sys->dense ? malloc(n * sizeof *s->col) : NULL;
+        if (!s->gather || (sys->dense && !s->col))
+            return rp_error_set(err, RP_ERR_NOMEM, "southwell: out of memory");
+        sys->bytes += (cols * n + 1) * sizeof *s->gather + (sys->dense ? n * sizeof *s->col : 0);
+    }
     for (size_t i = 0; i < n; i++)
         s->slot_of[i] = -1;
     for (size_t k = 0; k < n * nb; k++)
@@ -252,6 +284,20 @@ static rp_status sw_column(sw_state *s, uint32_t i, rp_step_info *info, const fl
 {
     rp_rad_system *sys = &s->sys;
     const size_t n = sys->n;
+    const int split = rp_rad_split(sys);
+    if (sys->dense && split) {
+        /* F_ji from the owners of rows j, summed: collective */
+        rp_status st = rp_rad_system_matrix(sys, info, err);
+        if (st != RP_OK)
+            return st;
+        for (size_t j = 0; j < n; j++)
+            s->gather[j] = rp_rad_owns(sys, j) ? rp_rad_local_row(sys, j)[i] : 0;
+        rp_comm_sum(sys->comm, s->gather, n);
+        for (size_t j = 0; j < n; j++)
+            s->col[j] = (float)s->gather[j];
+        *out = s->col;
+        return RP_OK;
+    }
     if (sys->dense) {
         if (!s->transposed) {
             rp_status st = rp_rad_system_matrix(sys, info, err);
@@ -286,21 +332,26 @@ static rp_status sw_column(sw_state *s, uint32_t i, rp_step_info *info, const fl
         double rays = 0, ff = 0;
         int stop = 0;
         if (!s->by_rows) {
-            /* F_ji pair by pair: the same values as row j. */
+            /* F_ji pair by pair: the same values as row j (split: this
+             * rank's rows j, the others' entries 0 until the sum). */
             const long total = (long)(m * n);
-#pragma omp parallel for num_threads(sys->threads) schedule(dynamic, 64) reduction(+ : rays) \
+#pragma omp parallel for num_threads(sys->threads) schedule(dynamic, 64) reduction(+ : rays, ff) \
     reduction(max : stop)
             for (long q = 0; q < total; q++) {
+                size_t t = (size_t)q / n, j = (size_t)q % n;
+                float *col = sys->rowbuf + (size_t)s->batch_slot[t] * n;
+                if (!rp_rad_owns(sys, j)) {
+                    col[j] = 0;
+                    continue;
+                }
                 if (rp_cancelled(sys->cancel)) {
                     stop = 1;
                     continue;
                 }
-                size_t t = (size_t)q / n, j = (size_t)q % n;
-                float *col = sys->rowbuf + (size_t)s->batch_slot[t] * n;
                 col[j] = (float)rp_ff_pair(sys->ff, sys->scratch[omp_get_thread_num()], (uint32_t)j,
                                            s->batch[t], NULL, &rays);
+                ff += 1;
             }
-            ff = (double)total;
         } else {
             /* Whole rows only (hemicube): F_ji = F_ij A_i / A_j. */
 #pragma omp parallel for num_threads(sys->threads) schedule(dynamic, 1) reduction(+ : rays, ff) \
@@ -312,6 +363,11 @@ static rp_status sw_column(sw_state *s, uint32_t i, rp_step_info *info, const fl
                 }
                 uint32_t r = s->batch[t];
                 float *buf = sys->rowbuf + (size_t)s->batch_slot[t] * n;
+                if (!rp_rad_owns(sys, r)) {
+                    /* split: row r's owner computes the column */
+                    memset(buf, 0, n * sizeof *buf);
+                    continue;
+                }
                 rp_rad_row(sys, r, sys->scratch[omp_get_thread_num()], buf, &ff, &rays);
                 for (size_t j = 0; j < n; j++)
                     buf[j] = (float)((double)buf[j] * sys->area[r] / sys->area[j]);
@@ -319,6 +375,22 @@ static rp_status sw_column(sw_state *s, uint32_t i, rp_step_info *info, const fl
         }
         info->rays += rays;
         info->form_factors += ff;
+        if (split) {
+            /* every rank's entries of the batch's columns to every rank */
+            for (size_t t = 0; t < m; t++) {
+                const float *col = sys->rowbuf + (size_t)s->batch_slot[t] * n;
+                for (size_t j = 0; j < n; j++)
+                    s->gather[t * n + j] = col[j];
+            }
+            s->gather[m * n] = stop;
+            rp_comm_sum(sys->comm, s->gather, m * n + 1);
+            stop = s->gather[m * n] > 0;
+            for (size_t t = 0; t < m; t++) {
+                float *col = sys->rowbuf + (size_t)s->batch_slot[t] * n;
+                for (size_t j = 0; j < n; j++)
+                    col[j] = (float)s->gather[t * n + j];
+            }
+        }
         if (stop) {
             /* The batch's columns are incomplete: out of the cache. */
             for (size_t t = 0; t < m; t++) {
@@ -515,4 +587,5 @@ const rp_solver_type rp_solver_southwell = {
     .estimate = sw_estimate,
     .fini = sw_fini,
     .iteration_name = "shots",
+    .distributed = 1,
 };

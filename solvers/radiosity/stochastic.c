@@ -47,10 +47,17 @@
  * replica, iteration, ray index) (pathtrace/sampler.h, random or
  * Owen-scrambled Sobol'); the rays record (source, hit) per ray in parallel
  * and the contributions are added in ray order, one replica per thread, so
- * the result is bit-identical for any thread count. */
+ * the result is bit-identical for any thread count.
+ *
+ * Split over MPI ranks (solvers/comm.h), the rays are traced by blocks of
+ * SJ_RAY_BLOCK by global index, round robin (rp_comm_owns), and every
+ * rank's (source, hit) records are summed over the ranks (one tracer per
+ * ray: exact), so every rank adds up the same records in the same order
+ * as a single process: bit-identical for any rank count too. */
 #include <gsl/gsl_interp.h>
 #include <limits.h>
 #include <math.h>
+#include <stddef.h>
 #include <omp.h>
 #include <stdlib.h>
 #include <string.h>
@@ -102,6 +109,8 @@ typedef struct sj_state {
     double *cdf;               /* per replica n + 1: cumulative source weight */
     double *shot;              /* per replica: total source weight this iteration */
     uint32_t *src, *hit;       /* per ray of an iteration (K M): RP_NONE for none */
+    const rp_comm *comm;       /* ranks the rays are split over (NULL: alone) */
+    double *xchg;              /* split: 2 K M, the records being summed */
 
     rp_sampler sampler;
     double unshot_eps;
@@ -162,6 +171,7 @@ static void sj_fini(void *state)
     free(s->shot);
     free(s->src);
     free(s->hit);
+    free(s->xchg);
     memset(s, 0, sizeof *s);
 }
 
@@ -279,12 +289,16 @@ static rp_status sj_init(void *state, const rp_scene *scene, const rp_options *o
     s->shot = calloc(K, sizeof *s->shot);
     s->src = malloc(R * sizeof *s->src);
     s->hit = malloc(R * sizeof *s->hit);
+    s->comm = o && o->size >= offsetof(rp_options, comm) + sizeof o->comm ? o->comm : NULL;
+    if (rp_comm_size(s->comm) > 1)
+        s->xchg = malloc(2 * R * sizeof *s->xchg);
     if (!s->area || !s->split || !s->rho || !s->phi || !s->P || !s->dP || !s->acc || !s->cdf ||
-        !s->shot || !s->src || !s->hit)
+        !s->shot || !s->src || !s->hit || (rp_comm_size(s->comm) > 1 && !s->xchg))
         return rp_error_set(err, RP_ERR_NOMEM, "stochastic-jacobi: out of memory for %zu elements x %zu replicas",
                             n, K);
     s->bytes = (double)(n * (2 + 2 * nb) * sizeof(double) + K * n * nb * 3 * sizeof(double) +
-                        K * (n + 2) * sizeof(double) + R * 2 * sizeof(uint32_t));
+                        K * (n + 2) * sizeof(double) + R * 2 * sizeof(uint32_t) +
+                        (s->xchg ? 2 * R * sizeof *s->xchg : 0));
 
     const rp_material *mats = rp_scene_materials(scene);
     const rp_surface *surfs = rp_scene_surfaces(scene);
@@ -404,11 +418,30 @@ static rp_status sj_step(void *state, rp_step_info *info, rp_error *err)
 
     const size_t R = K * M;
     const long nblocks = (long)((R + SJ_RAY_BLOCK - 1) / SJ_RAY_BLOCK);
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4)
+    unsigned long long traced = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : traced)
     for (long blk = 0; blk < nblocks; blk++) {
         size_t r0 = (size_t)blk * SJ_RAY_BLOCK, r1 = r0 + SJ_RAY_BLOCK < R ? r0 + SJ_RAY_BLOCK : R;
+        if (!rp_comm_owns(s->comm, (size_t)blk)) {
+            for (size_t r = r0; r < r1; r++)
+                s->src[r] = s->hit[r] = 0; /* another rank's: 0 in the sum */
+            continue;
+        }
         for (size_t r = r0; r < r1; r++)
             sj_ray(s, r / M, (uint32_t)(r % M), &s->src[r], &s->hit[r]);
+        traced += r1 - r0;
+    }
+    if (s->xchg) {
+        /* element indices and RP_NONE are exact in a double */
+        for (size_t r = 0; r < R; r++) {
+            s->xchg[2 * r] = s->src[r];
+            s->xchg[2 * r + 1] = s->hit[r];
+        }
+        rp_comm_sum(s->comm, s->xchg, 2 * R);
+        for (size_t r = 0; r < R; r++) {
+            s->src[r] = (uint32_t)s->xchg[2 * r];
+            s->hit[r] = (uint32_t)s->xchg[2 * r + 1];
+        }
     }
 
     /* Contributions in ray order within each replica: a ray from i landing
@@ -450,7 +483,7 @@ static rp_status sj_step(void *state, rp_step_info *info, rp_error *err)
     }
 
     s->iterations++;
-    info->rays += (double)R;
+    info->rays += (double)traced; /* this rank's: the driver sums the ranks */
     info->iterations += 1;
     info->memory = s->bytes;
     double p;
@@ -605,4 +638,5 @@ const rp_solver_type rp_solver_stochastic_jacobi = {
     .estimate = sj_estimate,
     .fini = sj_fini,
     .monte_carlo = 1,
+    .distributed = 1,
 };

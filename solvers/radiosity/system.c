@@ -14,6 +14,36 @@
 #define RAD_ROW_BLOCK 64
 #define MIB(x) ((double)(x) / (1024.0 * 1024.0))
 
+void rp_rad_agree(const rp_rad_system *s, int *stop, long *bad)
+{
+    if (!rp_rad_split(s))
+        return;
+    /* max of n - bad picks the lowest failing row */
+    double v[2] = {*stop ? 1 : 0, *bad == LONG_MAX ? 0 : (double)s->n - (double)*bad};
+    rp_comm_max(s->comm, v, 2);
+    *stop = v[0] > 0;
+    *bad = v[1] > 0 ? (long)((double)s->n - v[1]) : LONG_MAX;
+}
+
+rp_status rp_rad_share_error(const rp_rad_system *s, rp_status st, rp_error *err, int root)
+{
+    if (!rp_rad_split(s))
+        return st;
+    struct {
+        int status;
+        char message[sizeof err->message];
+    } why;
+    memset(&why, 0, sizeof why);
+    why.status = (int)st;
+    if (err && rp_comm_rank(s->comm) == root)
+        memcpy(why.message, err->message, sizeof why.message);
+    rp_comm_bcast(s->comm, &why, sizeof why, root);
+    why.message[sizeof why.message - 1] = '\0';
+    if (err)
+        memcpy(err->message, why.message, sizeof why.message);
+    return (rp_status)why.status;
+}
+
 int rp_rad_threads(const rp_rad_system *s)
 {
     return s->threads > 0 ? s->threads : omp_get_max_threads();
@@ -162,6 +192,7 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
     s->log = o ? o->log : NULL;
     s->log_ctx = o ? o->log_ctx : NULL;
     s->cancel = o && o->size >= offsetof(rp_options, cancel) + sizeof o->cancel ? o->cancel : NULL;
+    s->comm = o && o->size >= offsetof(rp_options, comm) + sizeof o->comm ? o->comm : NULL;
     s->residual = -1;
     if (o && o->threads < 0)
         return rp_error_set(err, RP_ERR_INPUT, "%s: %d threads", cfg->name, o->threads);
@@ -185,6 +216,11 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
     const size_t n = s->n, nb = s->nb;
     if (n == 0)
         return rp_error_set(err, RP_ERR_INPUT, "%s: the scene has no elements", cfg->name);
+    {
+        /* round robin: rows rank, rank + K, ... (rp_comm_owns) */
+        size_t K = (size_t)rp_comm_size(s->comm), r = (size_t)rp_comm_rank(s->comm);
+        s->nloc = n > r ? (n - r + K - 1) / K : 0;
+    }
     if (cfg->max_elements && n > cfg->max_elements)
         return rp_error_set(err, RP_ERR_INPUT, "%s: %zu elements is more than the %zu it allows (%s); "
                             "ask for fewer with --elements or --max-edge", cfg->name, n, cfg->max_elements,
@@ -236,8 +272,9 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
         }
     }
 
-    size_t dense_bytes = n * n * sizeof(float);
-    if (n > SIZE_MAX / sizeof(float) / n)
+    /* this rank's rows (all of them alone) */
+    size_t dense_bytes = s->nloc * n * sizeof(float);
+    if (s->nloc && s->nloc > SIZE_MAX / sizeof(float) / n)
         dense_bytes = SIZE_MAX;
     if (storage == RP_RAD_STORAGE_AUTO)
         s->dense = dense_bytes < RP_RAD_DENSE_CAP;
@@ -250,7 +287,7 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
         if (dense_bytes == SIZE_MAX)
             return rp_error_set(err, RP_ERR_NOMEM, "%s: a dense matrix of %zu elements does not fit in memory",
                                 cfg->name, n);
-        s->F = malloc(dense_bytes);
+        s->F = malloc(dense_bytes ? dense_bytes : 1);
         if (!s->F)
             return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory for a dense %zu x %zu form-factor matrix "
                                 "(%.1f MiB); try --matrix rows", cfg->name, n, n, MIB(dense_bytes));
@@ -265,10 +302,17 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
             return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory for form-factor rows", cfg->name);
         s->bytes += s->rowbuf_rows * n * sizeof *s->rowbuf;
     }
-    rp_rad_log(s, "%s: %zu elements, %zu bands, %s form factors, %s (%.1f MiB of solver memory)", cfg->name,
-               n, nb, rp_ff_method_name(s->ffp.method),
-               s->dense ? "dense single-precision matrix" : "form factors computed on the fly",
-               MIB(s->bytes));
+    if (rp_rad_split(s))
+        rp_rad_log(s, "%s: %zu elements, %zu bands, %s form factors, %s, rows split over %d ranks "
+                   "(%.1f MiB of solver memory on rank %d, which owns %zu rows)", cfg->name, n, nb,
+                   rp_ff_method_name(s->ffp.method),
+                   s->dense ? "dense single-precision matrix" : "form factors computed on the fly",
+                   rp_comm_size(s->comm), MIB(s->bytes), rp_comm_rank(s->comm), s->nloc);
+    else
+        rp_rad_log(s, "%s: %zu elements, %zu bands, %s form factors, %s (%.1f MiB of solver memory)", cfg->name,
+                   n, nb, rp_ff_method_name(s->ffp.method),
+                   s->dense ? "dense single-precision matrix" : "form factors computed on the fly",
+                   MIB(s->bytes));
     return RP_OK;
 }
 
@@ -354,11 +398,54 @@ void rp_rad_scale_row(const rp_rad_system *s, uint32_t i, float *row)
     s->row_scaled[i] = 1;
 }
 
+static void rad_report_scaled(rp_rad_system *s, int gather);
+
+/* Under a split: every rank's row sums and scaled flags to every rank
+ * (each row from its owner, so the sums are exact), and the largest row
+ * sum over all.  Collective.  Without memory for the buffer the stats
+ * stay this rank's (they only feed a message). */
+static void rad_gather_row_stats(rp_rad_system *s)
+{
+    const size_t n = s->n;
+    double *v = malloc((2 * n + 1) * sizeof *v);
+    double mx[1] = {s->max_row_sum};
+    rp_comm_max(s->comm, mx, 1);
+    s->max_row_sum = mx[0];
+    /* the same on every rank: a failed malloc here makes them disagree
+     * on the collective, so a rank without the buffer sends a flag
+     * first */
+    double ok[1] = {v ? 0 : 1};
+    rp_comm_max(s->comm, ok, 1);
+    if (ok[0] > 0) {
+        free(v);
+        return;
+    }
+    for (size_t i = 0; i < n; i++) {
+        int own = rp_rad_owns(s, i);
+        v[i] = own ? s->row_sum[i] : 0;
+        v[n + i] = own ? s->row_scaled[i] : 0;
+    }
+    rp_comm_sum(s->comm, v, 2 * n);
+    for (size_t i = 0; i < n; i++) {
+        s->row_sum[i] = v[i];
+        s->row_scaled[i] = v[n + i] > 0;
+    }
+    free(v);
+}
+
 void rp_rad_report_scaled(rp_rad_system *s)
+{
+    rad_report_scaled(s, 1);
+}
+
+/* gather: under a split, collect every rank's row stats first */
+static void rad_report_scaled(rp_rad_system *s, int gather)
 {
     if (s->rows_reported)
         return;
     s->rows_reported = 1;
+    if (gather && rp_rad_split(s))
+        rad_gather_row_stats(s);
     size_t count = 0, worst = 0;
     for (size_t i = 0; i < s->n; i++)
         if (s->row_scaled[i]) {
@@ -381,7 +468,7 @@ const float *rp_rad_row(const rp_rad_system *s, uint32_t i, rp_ff_scratch *scrat
                         double *ff, double *rays)
 {
     if (s->F && s->matrix_ready)
-        return s->F + (size_t)i * s->n;
+        return rp_rad_local_row(s, i);
     rp_ff_row(s->ff, scratch, i, buf, rays);
     *ff += (double)s->n;
     rp_rad_scale_row(s, i, buf);
@@ -437,10 +524,161 @@ static int rad_fill_pairs(rp_rad_system *s, double *rays_out, double *ff_out)
     return stop;
 }
 
+/* Exchange buffer per chunk of rows (doubles). */
+#define RAD_XCHG_BYTES ((size_t)32 << 20)
+
+/* The dense matrix split over ranks: this rank's rows, each pair computed
+ * once over all ranks, by the owner of its primary side (rp_ff_primary),
+ * as rad_fill_pairs does alone: row i computes the pairs it is primary
+ * for and writes F_ij and F_ji, the latter into this rank's row j or, when
+ * another rank owns row j, into the exchange buffer.  (Computing a pair
+ * from the other side would cost more: the far-pair rules keep terms per
+ * receiver, formfactor.c.)  Round robin spreads the rows, hence the
+ * primary pairs, evenly.  The columns j go by chunks, each chunk's sends
+ * through one rp_comm_sum of a chunk x n buffer where each entry has one
+ * sender (exact), so the receiver stores the float the sender computed.  A pair's value depends only on (seed,
+ * pair) (formfactor.h), so every row is bit for bit the row a single
+ * process computes.  Collective: every rank runs the same chunks, and a
+ * cancel on any rank stops all after the chunk.  Returns the agreed stop
+ * flag, or -1 out of memory (agreed too). */
+static int rad_fill_split(rp_rad_system *s, double *rays_out, double *ff_out)
+{
+    const size_t n = s->n, K = (size_t)rp_comm_size(s->comm);
+    const int me = rp_comm_rank(s->comm);
+    const int reciprocal = rp_ff_reciprocal(s->ff);
+    size_t C = RAD_XCHG_BYTES / sizeof(double) / n;
+    C = C < 1 ? 1 : (C > n ? n : C);
+    double *buf = reciprocal ? malloc((C * n + 1) * sizeof *buf) : NULL;
+    double oom[1] = {reciprocal && !buf};
+    rp_comm_max(s->comm, oom, 1);
+    if (oom[0] > 0) {
+        free(buf);
+        return -1;
+    }
+    double rays = 0, ff = 0;
+    int stop = 0;
+    if (!reciprocal) {
+        /* Whole rows (hemicube): each rank its own. */
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : rays, ff) \
+    reduction(max : stop)
+        for (long l = 0; l < (long)s->nloc; l++) {
+            if (rp_cancelled(s->cancel)) {
+                stop = 1;
+                continue;
+            }
+            rp_ff_row(s->ff, s->scratch[omp_get_thread_num()], (uint32_t)rp_rad_global_row(s, (size_t)l),
+                      s->F + (size_t)l * n, &rays);
+            ff += (double)n;
+        }
+        long none = LONG_MAX;
+        rp_rad_agree(s, &stop, &none);
+        *rays_out += rays;
+        *ff_out += ff;
+        return stop;
+    }
+    for (size_t l = 0; l < s->nloc; l++) {
+        size_t i = rp_rad_global_row(s, l);
+        s->F[l * n + i] = 0;
+    }
+    for (size_t j0 = 0; j0 < n; j0 += C) {
+        const size_t j1 = j0 + C < n ? j0 + C : n, m = (j1 - j0) * n;
+        memset(buf, 0, (m + 1) * sizeof *buf);
+        if (!stop) {
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : rays, ff) \
+    reduction(max : stop)
+            for (long l = 0; l < (long)s->nloc; l++) {
+                if (rp_cancelled(s->cancel)) {
+                    stop = 1;
+                    continue;
+                }
+                rp_ff_scratch *scr = s->scratch[omp_get_thread_num()];
+                const size_t i = rp_rad_global_row(s, (size_t)l);
+                float *row = s->F + (size_t)l * n;
+                for (size_t j = j0; j < j1; j++) {
+                    if (j == i || !rp_ff_primary(s->ff, (uint32_t)i, (uint32_t)j))
+                        continue;
+                    double fij, fji;
+                    rp_ff_pair_both(s->ff, scr, (uint32_t)i, (uint32_t)j, &fij, &fji, &rays);
+                    row[j] = (float)fij;
+                    if (rp_rad_owns(s, j))
+                        rp_rad_local_row(s, j)[i] = (float)fji;
+                    else
+                        buf[(j - j0) * n + i] = (float)fji;
+                    ff += 1;
+                }
+            }
+        }
+        buf[m] = stop;
+        rp_comm_sum(s->comm, buf, m + 1);
+        if (buf[m] > 0) {
+            stop = 1;
+            break;
+        }
+        /* the entries of this rank's rows in the chunk that other ranks
+         * computed: pairs whose primary side is another rank's row */
+        for (size_t j = j0 + ((size_t)me + K - j0 % K) % K; j < j1; j += K) {
+            float *row = rp_rad_local_row(s, j);
+            const double *in = buf + (j - j0) * n;
+            for (size_t i = 0; i < n; i++)
+                if (i != j && !rp_rad_owns(s, i) && rp_ff_primary(s->ff, (uint32_t)i, (uint32_t)j))
+                    row[i] = (float)in[i];
+        }
+    }
+    free(buf);
+    *rays_out += rays;
+    *ff_out += ff;
+    return stop;
+}
+
+/* rp_rad_system_matrix under a split: collective. */
+static rp_status rad_matrix_split(rp_rad_system *s, rp_step_info *info, rp_error *err)
+{
+    const size_t n = s->n, nloc = s->nloc;
+    double rays = 0, ff = 0;
+    int stop = rad_fill_split(s, &rays, &ff);
+    info->rays += rays;
+    info->form_factors += ff;
+    if (stop < 0)
+        return rp_error_set(err, RP_ERR_NOMEM, "%s: out of memory for the form-factor exchange buffer", s->name);
+    if (stop)
+        return rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted while computing form factors", s->name);
+    long bad = LONG_MAX;
+    double max_sum = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(min : bad) reduction(max : max_sum)
+    for (long l = 0; l < (long)nloc; l++) {
+        const size_t i = rp_rad_global_row(s, (size_t)l);
+        float *row = s->F + (size_t)l * n;
+        double sum;
+        rp_rad_scale_row(s, (uint32_t)i, row);
+        if (rp_rad_check_row(s, (uint32_t)i, row, &sum, NULL) != RP_OK && (long)i < bad)
+            bad = (long)i;
+        if (s->row_sum[i] > max_sum)
+            max_sum = s->row_sum[i];
+    }
+    s->max_row_sum = max_sum;
+    rp_rad_agree(s, &stop, &bad);
+    if (bad != LONG_MAX) {
+        int owner = (int)((size_t)bad % (size_t)rp_comm_size(s->comm));
+        rp_status st = RP_ERR_RUNTIME;
+        if (rp_rad_owns(s, (size_t)bad))
+            st = rad_first_bad_row(s, rp_rad_local_row(s, (size_t)bad), (uint32_t)bad, err);
+        return rp_rad_share_error(s, st, err, owner);
+    }
+    s->matrix_ready = 1;
+    rad_gather_row_stats(s); /* every rank's rows, for the messages */
+    rp_rad_log(s, "%s: %zu x %zu form factors computed (%.1f MiB on this rank, %zu rows of %d ranks), "
+               "largest row sum %.9g", s->name, n, n, MIB(nloc * n * sizeof(float)), nloc,
+               rp_comm_size(s->comm), s->max_row_sum);
+    rad_report_scaled(s, 0);
+    return RP_OK;
+}
+
 rp_status rp_rad_system_matrix(rp_rad_system *s, rp_step_info *info, rp_error *err)
 {
     if (!s->dense || s->matrix_ready)
         return RP_OK;
+    if (rp_rad_split(s))
+        return rad_matrix_split(s, info, err);
     const size_t n = s->n;
     double rays = 0, ff = 0;
     float *F = s->F;
@@ -489,14 +727,19 @@ rp_status rp_rad_system_matrix(rp_rad_system *s, rp_step_info *info, rp_error *e
 rp_status rp_rad_matvec(rp_rad_system *s, const double *X, double *Y, rp_step_info *info, rp_error *err)
 {
     const size_t n = s->n, nb = s->nb;
+    /* Split: this rank's rows (local row l is row rp_rad_global_row(l),
+     * which is l alone), the others' rows of Y 0 until the sum. */
+    if (rp_rad_split(s))
+        memset(Y, 0, n * nb * sizeof *Y);
     if (s->dense) {
         rp_status st = rp_rad_system_matrix(s, info, err);
         if (st != RP_OK)
             return st;
         const float *F = s->F;
 #pragma omp parallel for num_threads(s->threads) schedule(static)
-        for (long i = 0; i < (long)n; i++)
-            rp_rad_dot(F + (size_t)i * n, X, n, nb, Y + (size_t)i * nb);
+        for (long l = 0; l < (long)s->nloc; l++)
+            rp_rad_dot(F + (size_t)l * n, X, n, nb, Y + rp_rad_global_row(s, (size_t)l) * nb);
+        rp_comm_sum(s->comm, Y, n * nb);
         return RP_OK;
     }
     /* Rows on the fly: every row is computed (and checked) again. */
@@ -505,7 +748,8 @@ rp_status rp_rad_matvec(rp_rad_system *s, const double *X, double *Y, rp_step_in
     int stop = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 4) reduction(+ : rays, ff) \
     reduction(min : bad) reduction(max : max_sum, stop)
-    for (long i = 0; i < (long)n; i++) {
+    for (long l = 0; l < (long)s->nloc; l++) {
+        const long i = (long)rp_rad_global_row(s, (size_t)l);
         if (rp_cancelled(s->cancel)) {
             stop = 1;
             continue;
@@ -526,14 +770,20 @@ rp_status rp_rad_matvec(rp_rad_system *s, const double *X, double *Y, rp_step_in
     info->rays += rays;
     info->form_factors += ff;
     s->max_row_sum = max_sum;
+    rp_rad_agree(s, &stop, &bad);
     if (stop)
         return rad_interrupted(s, "computing form factors", err);
     if (bad != LONG_MAX) {
-        float *buf = s->rowbuf;
-        double dff = 0, drays = 0;
-        rp_rad_row(s, (uint32_t)bad, s->scratch[0], buf, &dff, &drays);
-        return rad_first_bad_row(s, buf, (uint32_t)bad, err);
+        rp_status st = RP_ERR_RUNTIME;
+        if (rp_rad_owns(s, (size_t)bad)) {
+            float *buf = s->rowbuf;
+            double dff = 0, drays = 0;
+            rp_rad_row(s, (uint32_t)bad, s->scratch[0], buf, &dff, &drays);
+            st = rad_first_bad_row(s, buf, (uint32_t)bad, err);
+        }
+        return rp_rad_share_error(s, st, err, (int)((size_t)bad % (size_t)rp_comm_size(s->comm)));
     }
+    rp_comm_sum(s->comm, Y, n * nb);
     rp_rad_report_scaled(s);
     return RP_OK;
 }

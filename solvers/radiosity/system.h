@@ -61,6 +61,15 @@ typedef struct rp_rad_system {
     const char *name;
     const rp_scene *scene;
     size_t n, nb;
+    /* The ranks the rows are split over (solvers/comm.h; NULL: alone).
+     * Row i belongs to rank i mod K (rp_comm_owns), which alone computes
+     * and stores it, as local row i / K of F: a dense F holds nloc rows
+     * of n here, so memory per rank falls as 1/K and no rank ever holds
+     * the whole matrix.  B, E, G and the per-element arrays are whole on
+     * every rank; what a rank computes for its rows is combined with
+     * rp_comm_sum, each element having one contributor, hence exactly. */
+    const rp_comm *comm;
+    size_t nloc;            /* rows this rank owns (n when alone) */
     int threads;            /* > 0 */
     unsigned want;
     int open_ended;
@@ -77,7 +86,8 @@ typedef struct rp_rad_system {
 
     int reciprocity;        /* dense F from pairs i < j, mirrored */
     int dense;              /* F is stored */
-    float *F;               /* n x n, row-major, when dense and computed */
+    float *F;               /* nloc x n, row-major (rp_rad_local_row), when dense
+                               and computed; n x n when alone */
     int matrix_ready;
 
     double *area;           /* n */
@@ -88,9 +98,11 @@ typedef struct rp_rad_system {
     double e_norm[RP_RAD_MAX_BANDS];   /* sum_i A_i E_ib */
     double rho_max[RP_RAD_MAX_BANDS];  /* max_i rho_ib */
     double max_row_sum;     /* largest sum_j F_ij checked so far (dense: all rows),
-                               before any scaling */
-    double *row_sum;        /* n: sum_j F_ij of each row as computed, before scaling */
-    unsigned char *row_scaled; /* n: 1 if rp_rad_scale_row scaled the row */
+                               before any scaling; all ranks' */
+    double *row_sum;        /* n: sum_j F_ij of each row as computed, before scaling
+                               (split: this rank's rows; all rows once the
+                               dense matrix is done) */
+    unsigned char *row_scaled; /* n: 1 if rp_rad_scale_row scaled the row (as row_sum) */
     size_t rows_scaled;     /* how many, once reported */
     int rows_reported;      /* rp_rad_report_scaled has run */
     const atomic_int *cancel;
@@ -149,6 +161,41 @@ typedef struct rp_rad_system {
     {"gather-rays", "N", "image with --reconstruct gather: cosine-distributed rays per camera ray", \
      "16"}
 
+/* 1 if this rank owns (computes and stores) row i. */
+static inline int rp_rad_owns(const rp_rad_system *s, size_t i)
+{
+    return rp_comm_owns(s->comm, i);
+}
+
+/* The global index of this rank's local row l (l < nloc). */
+static inline size_t rp_rad_global_row(const rp_rad_system *s, size_t l)
+{
+    return (size_t)rp_comm_rank(s->comm) + l * (size_t)rp_comm_size(s->comm);
+}
+
+/* Row i of the stored matrix (this rank must own it). */
+static inline float *rp_rad_local_row(const rp_rad_system *s, size_t i)
+{
+    return s->F + i / (size_t)rp_comm_size(s->comm) * s->n;
+}
+
+/* 1 when the rows are split over more than one rank. */
+static inline int rp_rad_split(const rp_rad_system *s)
+{
+    return rp_comm_size(s->comm) > 1;
+}
+
+/* Under a split: makes every rank return the same outcome of a
+ * collective phase.  *stop (this rank was cancelled) becomes 1 on every
+ * rank if it is on any; *bad (the first failing row this rank found,
+ * LONG_MAX for none) becomes the first over all ranks.  Collective; a
+ * no-op alone. */
+void rp_rad_agree(const rp_rad_system *s, int *stop, long *bad);
+
+/* Under a split: status and message of rank `root` to every rank
+ * (collective); alone, st unchanged. */
+rp_status rp_rad_share_error(const rp_rad_system *s, rp_status st, rp_error *err, int root);
+
 /* Parses the common options, meshes the scene, builds the ray caster and the
  * form-factor context and fills the material arrays.  B starts at E.  On
  * failure the caller calls rp_rad_system_fini (which accepts a partly built
@@ -165,10 +212,12 @@ void rp_rad_system_fini(rp_rad_system *s);
 
 /* Computes and checks the dense matrix if the system stores one and it is
  * not there yet (in parallel over rows).  Adds form factors and rays cast to
- * info. */
+ * info (this rank's, under a split).  Split over ranks it is collective:
+ * each rank computes its share of the pairs and the ranks exchange the
+ * mirrored halves (system.c, rad_fill_split). */
 rp_status rp_rad_system_matrix(rp_rad_system *s, rp_step_info *info, rp_error *err);
 
-/* Row i of F: the stored row, or computed into buf (n floats) and scaled
+/* Row i of F (owned by this rank): the stored row, or computed into buf (n floats) and scaled
  * as the stored rows are (rp_rad_scale_row; *raw_sum gets its sum before,
  * -1 for a stored row); adds the work to *ff and *rays when it computes.
  * A computed row is not checked: the caller passes it to rp_rad_check_row
@@ -184,7 +233,8 @@ void rp_rad_scale_row(const rp_rad_system *s, uint32_t i, float *row);
 
 /* After a pass over every row (dense: the matrix; rows on the fly: the
  * first sweep): one warning through the log callback naming how many rows
- * were scaled and the worst, the first time there are any. */
+ * were scaled and the worst, the first time there are any.  Under a split
+ * the first call is collective (it counts every rank's rows). */
 void rp_rad_report_scaled(rp_rad_system *s);
 
 /* Refuses a row that would make the iteration diverge: RP_ERR_INPUT when
@@ -196,7 +246,9 @@ rp_status rp_rad_check_row(const rp_rad_system *s, uint32_t i, const float *row,
                            rp_error *err);
 
 /* Y = F X (n x nb each), in parallel over rows; rows are computed (and
- * checked) on the fly when F is not stored. */
+ * checked) on the fly when F is not stored.  Split over ranks, each rank
+ * computes its rows and Y is summed over the ranks (exact: one rank per
+ * row), so every rank gets the whole Y, the same as alone; collective. */
 rp_status rp_rad_matvec(rp_rad_system *s, const double *X, double *Y, rp_step_info *info,
                         rp_error *err);
 
