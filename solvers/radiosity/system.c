@@ -536,11 +536,12 @@ static int rad_fill_pairs(rp_rad_system *s, double *rays_out, double *ff_out)
  * receiver, formfactor.c.)  Round robin spreads the rows, hence the
  * primary pairs, evenly.  The columns j go by chunks, each chunk's sends
  * through one rp_comm_sum of a chunk x n buffer where each entry has one
- * sender (exact), so the receiver stores the float the sender computed.  A pair's value depends only on (seed,
- * pair) (formfactor.h), so every row is bit for bit the row a single
- * process computes.  Collective: every rank runs the same chunks, and a
- * cancel on any rank stops all after the chunk.  Returns the agreed stop
- * flag, or -1 out of memory (agreed too). */
+ * sender (exact), so the receiver stores the float the sender computed.
+ * A pair's value depends only on (seed, pair) (formfactor.h), so every
+ * row is bit for bit the row a single process computes.  Collective:
+ * every rank runs the same chunks, and a cancel on any rank stops all
+ * after the chunk.  Returns the agreed stop flag, or -1 out of memory
+ * (agreed too). */
 static int rad_fill_split(rp_rad_system *s, double *rays_out, double *ff_out)
 {
     const size_t n = s->n, K = (size_t)rp_comm_size(s->comm);
