@@ -71,10 +71,10 @@ static rp_status it_init_common(void *state, const rp_scene *scene, const rp_opt
 
 static rp_status jacobi_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
 {
-    return it_init_common(state, scene, o, "jacobi", err);
+    return rp_rad_init_agree(rp_rad_options_comm(o), it_init_common(state, scene, o, "jacobi", err), err);
 }
 
-static rp_status gs_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
+static rp_status gs_init_local(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
 {
     it_state *s = state;
     rp_status st = it_init_common(state, scene, o, "gauss-seidel", err);
@@ -90,6 +90,11 @@ static rp_status gs_init(void *state, const rp_scene *scene, const rp_options *o
         return rp_error_set(err, RP_ERR_NOMEM, "gauss-seidel: out of memory");
     sys->bytes += s->xbuf_size * sizeof *s->xbuf;
     return RP_OK;
+}
+
+static rp_status gs_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
+{
+    return rp_rad_init_agree(rp_rad_options_comm(o), gs_init_local(state, scene, o, err), err);
 }
 
 static void it_fini(void *state)

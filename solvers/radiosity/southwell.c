@@ -130,7 +130,7 @@ static void sw_fini(void *state)
     memset(s, 0, sizeof *s);
 }
 
-static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
+static rp_status sw_init_local(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
 {
     sw_state *s = state;
     rp_status st;
@@ -164,15 +164,6 @@ static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o
     s->batch_max = 4 * (size_t)sys->threads;
     if (s->batch_max > s->nslots / 2)
         s->batch_max = s->nslots / 2 > 0 ? s->nslots / 2 : 1;
-    if (rp_rad_split(sys)) {
-        /* The cache decides when columns are computed, hence the
-         * collectives: every rank takes the smallest cache and batch of
-         * all (their sizes follow the thread count, which may differ). */
-        double v[2] = {-(double)s->nslots, -(double)s->batch_max};
-        rp_comm_max(sys->comm, v, 2);
-        s->nslots = (size_t)-v[0];
-        s->batch_max = (size_t)-v[1];
-    }
     s->batch = malloc(s->batch_max * sizeof *s->batch);
     s->batch_slot = malloc(s->batch_max * sizeof *s->batch_slot);
     if (!s->U || !s->power || !s->reflect || !s->slot_of || !s->col_in || !s->used || !s->batch ||
@@ -573,6 +564,23 @@ static rp_status sw_estimate(const void *state, rp_estimate *e, rp_error *err)
             Bd[j * nb + b] = sys->B[j * nb + b] + sys->rho[j * nb + b] * ambient[b];
     rp_status st = rp_rad_estimate(sys, Bd, e, err);
     free(Bd);
+    return st;
+}
+
+static rp_status sw_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
+{
+    sw_state *s = state;
+    rp_status st = rp_rad_init_agree(rp_rad_options_comm(o), sw_init_local(state, scene, o, err), err);
+    if (st == RP_OK && rp_rad_split(&s->sys)) {
+        /* The cache decides when columns are computed, hence the
+         * collectives: every rank takes the smallest cache and batch of
+         * all (their sizes follow the thread count, which may differ;
+         * each rank's arrays hold its own, at least as large). */
+        double v[2] = {-(double)s->nslots, -(double)s->batch_max};
+        rp_comm_max(s->sys.comm, v, 2);
+        s->nslots = (size_t)-v[0];
+        s->batch_max = (size_t)-v[1];
+    }
     return st;
 }
 

@@ -240,7 +240,7 @@ static rp_status sj_parse(sj_state *s, const rp_options *o, rp_mesh_params *mp, 
     return RP_OK;
 }
 
-static rp_status sj_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
+static rp_status sj_init_local(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
 {
     sj_state *s = state;
     rp_status st;
@@ -289,7 +289,7 @@ static rp_status sj_init(void *state, const rp_scene *scene, const rp_options *o
     s->shot = calloc(K, sizeof *s->shot);
     s->src = malloc(R * sizeof *s->src);
     s->hit = malloc(R * sizeof *s->hit);
-    s->comm = o && o->size >= offsetof(rp_options, comm) + sizeof o->comm ? o->comm : NULL;
+    s->comm = rp_rad_options_comm(o);
     if (rp_comm_size(s->comm) > 1)
         s->xchg = malloc(2 * R * sizeof *s->xchg);
     if (!s->area || !s->split || !s->rho || !s->phi || !s->P || !s->dP || !s->acc || !s->cdf ||
@@ -332,6 +332,12 @@ static rp_status sj_init(void *state, const rp_scene *scene, const rp_options *o
         memset(s->dP, 0, K * n * nb * sizeof *s->dP);
     }
     return RP_OK;
+}
+
+/* Under a split every rank returns the lowest failing rank's status. */
+static rp_status sj_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
+{
+    return rp_rad_init_agree(rp_rad_options_comm(o), sj_init_local(state, scene, o, err), err);
 }
 
 /* A uniform point on element i from (u1, u2): a quad is split into the

@@ -25,23 +25,44 @@ void rp_rad_agree(const rp_rad_system *s, int *stop, long *bad)
     *bad = v[1] > 0 ? (long)((double)s->n - v[1]) : LONG_MAX;
 }
 
-rp_status rp_rad_share_error(const rp_rad_system *s, rp_status st, rp_error *err, int root)
+/* Status and message of rank root to every rank of c (size > 1). */
+static rp_status rad_bcast_error(const rp_comm *c, rp_status st, rp_error *err, int root)
 {
-    if (!rp_rad_split(s))
-        return st;
     struct {
         int status;
         char message[sizeof err->message];
     } why;
     memset(&why, 0, sizeof why);
     why.status = (int)st;
-    if (err && rp_comm_rank(s->comm) == root)
+    if (err && rp_comm_rank(c) == root)
         memcpy(why.message, err->message, sizeof why.message);
-    rp_comm_bcast(s->comm, &why, sizeof why, root);
+    rp_comm_bcast(c, &why, sizeof why, root);
     why.message[sizeof why.message - 1] = '\0';
     if (err)
         memcpy(err->message, why.message, sizeof why.message);
     return (rp_status)why.status;
+}
+
+rp_status rp_rad_share_error(const rp_rad_system *s, rp_status st, rp_error *err, int root)
+{
+    return rp_rad_split(s) ? rad_bcast_error(s->comm, st, err, root) : st;
+}
+
+const rp_comm *rp_rad_options_comm(const rp_options *o)
+{
+    return o && o->size >= offsetof(rp_options, comm) + sizeof o->comm ? o->comm : NULL;
+}
+
+rp_status rp_rad_init_agree(const rp_comm *c, rp_status st, rp_error *err)
+{
+    if (rp_comm_size(c) <= 1)
+        return st;
+    /* max of size - rank picks the lowest failing rank */
+    double v[1] = {st != RP_OK ? (double)(c->size - c->rank) : 0};
+    rp_comm_max(c, v, 1);
+    if (v[0] <= 0)
+        return RP_OK;
+    return rad_bcast_error(c, st, err, c->size - (int)v[0]);
 }
 
 int rp_rad_threads(const rp_rad_system *s)
@@ -192,7 +213,7 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
     s->log = o ? o->log : NULL;
     s->log_ctx = o ? o->log_ctx : NULL;
     s->cancel = o && o->size >= offsetof(rp_options, cancel) + sizeof o->cancel ? o->cancel : NULL;
-    s->comm = o && o->size >= offsetof(rp_options, comm) + sizeof o->comm ? o->comm : NULL;
+    s->comm = rp_rad_options_comm(o);
     s->residual = -1;
     if (o && o->threads < 0)
         return rp_error_set(err, RP_ERR_INPUT, "%s: %d threads", cfg->name, o->threads);
@@ -276,8 +297,11 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
     size_t dense_bytes = s->nloc * n * sizeof(float);
     if (s->nloc && s->nloc > SIZE_MAX / sizeof(float) / n)
         dense_bytes = SIZE_MAX;
+    /* auto: judged on the largest share (rank 0's), so that every rank
+     * makes the same choice */
+    const size_t nmax = (n + (size_t)rp_comm_size(s->comm) - 1) / (size_t)rp_comm_size(s->comm);
     if (storage == RP_RAD_STORAGE_AUTO)
-        s->dense = dense_bytes < RP_RAD_DENSE_CAP;
+        s->dense = nmax <= SIZE_MAX / sizeof(float) / n && nmax * n * sizeof(float) < RP_RAD_DENSE_CAP;
     else
         s->dense = storage == RP_RAD_STORAGE_DENSE;
     if (s->reciprocity && !s->dense)
@@ -536,11 +560,12 @@ static int rad_fill_pairs(rp_rad_system *s, double *rays_out, double *ff_out)
  * receiver, formfactor.c.)  Round robin spreads the rows, hence the
  * primary pairs, evenly.  The columns j go by chunks, each chunk's sends
  * through one rp_comm_sum of a chunk x n buffer where each entry has one
- * sender (exact), so the receiver stores the float the sender computed.  A pair's value depends only on (seed,
- * pair) (formfactor.h), so every row is bit for bit the row a single
- * process computes.  Collective: every rank runs the same chunks, and a
- * cancel on any rank stops all after the chunk.  Returns the agreed stop
- * flag, or -1 out of memory (agreed too). */
+ * sender (exact), so the receiver stores the float the sender computed.
+ * A pair's value depends only on (seed, pair) (formfactor.h), so every
+ * row is bit for bit the row a single process computes.  Collective:
+ * every rank runs the same chunks, and a cancel on any rank stops all
+ * after the chunk.  Returns the agreed stop flag, or -1 out of memory
+ * (agreed too). */
 static int rad_fill_split(rp_rad_system *s, double *rays_out, double *ff_out)
 {
     const size_t n = s->n, K = (size_t)rp_comm_size(s->comm);

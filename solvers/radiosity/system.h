@@ -196,6 +196,15 @@ void rp_rad_agree(const rp_rad_system *s, int *stop, long *bad);
  * (collective); alone, st unchanged. */
 rp_status rp_rad_share_error(const rp_rad_system *s, rp_status st, rp_error *err, int root);
 
+/* The communicator in o (NULL when o is NULL or predates the field). */
+const rp_comm *rp_rad_options_comm(const rp_options *o);
+
+/* The end of a split method's init: every rank returns the status and
+ * message of the lowest rank that failed (a rank short of memory would
+ * otherwise leave the others waiting in the first step's collectives).
+ * Collective over c; init must make no other collective before it. */
+rp_status rp_rad_init_agree(const rp_comm *c, rp_status st, rp_error *err);
+
 /* Parses the common options, meshes the scene, builds the ray caster and the
  * form-factor context and fills the material arrays.  B starts at E.  On
  * failure the caller calls rp_rad_system_fini (which accepts a partly built
