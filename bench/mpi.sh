@@ -42,8 +42,8 @@ printf "  K=1 %8.3f s\n  K=2 %8.3f s   speedup %sx (target >= 1.8)   pixels %s\n
 grep -o "per rank at most[^)]*" "$OUT/pt2.out" | sed 's/^/  K=2 /' || true
 
 echo "== uniform Gauss-Seidel: scenes/cornell.scene, $ELEMENTS elements, 1 thread per rank"
-run gs1 0 probe scenes/cornell.scene --method gauss-seidel --elements "$ELEMENTS" --threads 1 --surface-averages --json
-run gs2 2 probe scenes/cornell.scene --method gauss-seidel --elements "$ELEMENTS" --threads 1 --surface-averages --json
+run gs1 0 probe scenes/cornell.scene --method gauss-seidel --elements "$ELEMENTS" --matrix dense --threads 1 --surface-averages --json
+run gs2 2 probe scenes/cornell.scene --method gauss-seidel --elements "$ELEMENTS" --matrix dense --threads 1 --surface-averages --json
 printf "  K=1 %8.3f s\n  K=2 %8.3f s   speedup %sx (target >= 1.6)\n" \
     "$(secs gs1)" "$(secs gs2)" "$(ratio "$(secs gs1)" "$(secs gs2)")"
 m1=$(grep -o '"memory_bytes": [0-9.e+]*' "$OUT/gs1.out" | awk '{print $2 / 1048576}')

@@ -27,36 +27,10 @@
 #define MAX_VALUES 4096
 
 /* `mpirun -np ranks RP_BIN args` from the source directory (ranks 0:
- * plainly).  LeakSanitizer is off for the ranks under make asan: Open MPI
- * keeps allocations in the components it unloads at MPI_Finalize. */
+ * plainly), as tests/cli_util.c runs them. */
 static rp_run run_ranks(int ranks, const char *args)
 {
-    char out[64], err[64];
-    snprintf(out, sizeof out, "/tmp/rp_mpirad_out.%d", (int)getpid());
-    snprintf(err, sizeof err, "/tmp/rp_mpirad_err.%d", (int)getpid());
-    char prefix[256] = "";
-    if (ranks > 0)
-        snprintf(prefix, sizeof prefix,
-                 "ASAN_OPTIONS=\"${ASAN_OPTIONS:+$ASAN_OPTIONS:}detect_leaks=0\" "
-                 "mpirun -q --oversubscribe --bind-to none %s-np %d ",
-                 geteuid() == 0 ? "--allow-run-as-root " : "", ranks);
-    size_t n = strlen(args) + 1024;
-    char *cmd = malloc(n);
-    snprintf(cmd, n, "cd '%s' && %s'%s' %s >%s 2>%s </dev/null", RP_SOURCE_DIR, prefix, RP_BIN, args, out,
-             err);
-    int st = system(cmd);
-    free(cmd);
-    rp_run r;
-    r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-    r.out = rp_read_file(out);
-    r.err = rp_read_file(err);
-    if (!r.out)
-        r.out = calloc(1, 1);
-    if (!r.err)
-        r.err = calloc(1, 1);
-    unlink(out);
-    unlink(err);
-    return r;
+    return ranks > 0 ? rp_run_radpt_mpi(ranks, args) : rp_run_radpt(args);
 }
 
 /* Every number of every "radiance": [...] array of probe's JSON, in
