@@ -8,7 +8,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 RADPT=${RADPT:-./radpt}
-REF_SPP=${REF_SPP:-256}
+REF_SPP=${REF_SPP:-1024}
 ELEMENTS=${ELEMENTS:-20000}
 OUT=${OUT:-out/bench-mpi}
 mkdir -p "$OUT"
