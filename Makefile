@@ -217,7 +217,9 @@ uninstall:
 # from $(BUILD)/plugins/ (tests/test_plugin.c).
 STAGE := $(CURDIR)/$(BUILD)/stage
 EXAMPLES := $(notdir $(wildcard examples/plugins/*))
-plugins: $(BUILD)/$(SOREAL) $(BUILD)/radpt-installed
+# (everything install needs is a prerequisite, so that under -j the
+# sub-make finds it built rather than racing this make to build it)
+plugins: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD)/radpt.pc $(BUILD)/radpt.1
 	@$(MAKE) --no-print-directory install DESTDIR=$(STAGE) PREFIX=/usr >/dev/null
 	@mkdir -p $(BUILD)/plugins
 	@for e in $(EXAMPLES); do \
