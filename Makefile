@@ -63,7 +63,7 @@ TEST_OBJ := $(TEST_C:%.c=$(BUILD)/%.o)
 CGAL_DATA := /usr/share/doc/libcgal-dev/data.tar.gz
 MESHES := scenes/data/bunny00.off scenes/data/elephant.off scenes/data/armadillo.off
 
-.PHONY: all deps test check asan demo bench bench-mpi install uninstall plugins clean meshes fuzz fuzz-deps valgrind format
+.PHONY: all deps test check asan demo bench bench-mpi install uninstall plugins clean FORCE meshes fuzz fuzz-deps valgrind format
 all: radpt meshes
 
 radpt: $(BUILD)/radpt
@@ -87,11 +87,22 @@ $(BUILD)/$(SOREAL): $(LIB_OBJ)
 	ln -sf $(SOREAL) $(BUILD)/$(SONAME)
 	ln -sf $(SONAME) $(BUILD)/libradpt.so
 
-$(BUILD)/%.o: %.c
+# Objects depend on the compiler flags too (a build directory made before
+# a flag changed, such as -fPIC, is rebuilt rather than linked stale).
+# (FLAGS_TEXT is expanded here, once: target-specific additions such as
+# main.o's version string must not reach the stamp.)
+FLAGS_STAMP := $(BUILD)/flags.txt
+FLAGS_TEXT := $(CC) $(CXX) $(CPPFLAGS) $(CFLAGS) $(CXXFLAGS)
+$(FLAGS_STAMP): FORCE
+	@mkdir -p $(BUILD)
+	@echo '$(FLAGS_TEXT)' | cmp -s - $@ || echo '$(FLAGS_TEXT)' > $@
+FORCE:
+
+$(BUILD)/%.o: %.c $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CPPFLAGS) $(CFLAGS) -c -o $@ $<
 
-$(BUILD)/%.o: %.cpp
+$(BUILD)/%.o: %.cpp $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CXX) $(CPPFLAGS) $(CXXFLAGS) -c -o $@ $<
 
@@ -182,17 +193,15 @@ INSTALLED := $(PREFIX)/bin/radpt $(LIBDIR)/$(SOREAL) $(LIBDIR)/$(SONAME) $(LIBDI
 $(BUILD)/radpt-installed: $(CLI_OBJ) $(BUILD)/$(SOREAL)
 	$(CC) $(LDFLAGS) -o $@ $(CLI_OBJ) -L$(BUILD) -lradpt -Wl,-rpath,'$$ORIGIN/../lib' $(LDLIBS)
 
-$(BUILD)/radpt.pc: Makefile
-	@printf '%s\n' 'prefix=$(PREFIX)' 'libdir=$${prefix}/lib' 'includedir=$${prefix}/include' '' \
-	    'Name: radpt' \
-	    'Description: radiosity and path tracing compared: the solver interface, scene and ray queries, plugins' \
-	    'Version: $(VERSION)' 'Cflags: -I$${includedir}' 'Libs: -L$${libdir} -lradpt -lm' \
-	    'Libs.private: $(LDLIBS)' > $@
+# radpt.pc is written by install itself: it names the PREFIX installed to.
+PC_LINES := 'prefix=$(PREFIX)' 'libdir=$${prefix}/lib' 'includedir=$${prefix}/include' '' 'Name: radpt' \
+    'Description: radiosity and path tracing compared: the solver interface, scene and ray queries, plugins' \
+    'Version: $(VERSION)' 'Cflags: -I$${includedir}' 'Libs: -L$${libdir} -lradpt -lm' 'Libs.private: $(LDLIBS)'
 
 $(BUILD)/radpt.1: $(BUILD)/radpt bench/manpage.sh
 	bench/manpage.sh $(BUILD)/radpt $(VERSION) > $@
 
-install: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD)/radpt.pc $(BUILD)/radpt.1
+install: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD)/radpt.1
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/share/man/man1 \
 	    $(DESTDIR)$(INCDIR)/geometry $(DESTDIR)$(INCDIR)/solvers
 	install -m 755 $(BUILD)/radpt-installed $(DESTDIR)$(PREFIX)/bin/radpt
@@ -200,7 +209,8 @@ install: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD
 	ln -sf $(SOREAL) $(DESTDIR)$(LIBDIR)/$(SONAME)
 	ln -sf $(SONAME) $(DESTDIR)$(LIBDIR)/libradpt.so
 	install -m 644 $(BUILD)/libradpt.a $(DESTDIR)$(LIBDIR)/libradpt.a
-	install -m 644 $(BUILD)/radpt.pc $(DESTDIR)$(LIBDIR)/pkgconfig/radpt.pc
+	printf '%s\n' $(PC_LINES) > $(DESTDIR)$(LIBDIR)/pkgconfig/radpt.pc
+	chmod 644 $(DESTDIR)$(LIBDIR)/pkgconfig/radpt.pc
 	install -m 644 $(BUILD)/radpt.1 $(DESTDIR)$(PREFIX)/share/man/man1/radpt.1
 	install -m 644 include/radpt/radpt.h $(DESTDIR)$(INCDIR)/radpt.h
 	install -m 644 $(PUBLIC_GEOMETRY:%=geometry/%) $(DESTDIR)$(INCDIR)/geometry/
@@ -219,7 +229,7 @@ STAGE := $(CURDIR)/$(BUILD)/stage
 EXAMPLES := $(notdir $(wildcard examples/plugins/*))
 # (everything install needs is a prerequisite, so that under -j the
 # sub-make finds it built rather than racing this make to build it)
-plugins: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD)/radpt.pc $(BUILD)/radpt.1
+plugins: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD)/radpt.1
 	@$(MAKE) --no-print-directory install DESTDIR=$(STAGE) PREFIX=/usr >/dev/null
 	@mkdir -p $(BUILD)/plugins
 	@for e in $(EXAMPLES); do \
