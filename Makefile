@@ -193,8 +193,11 @@ INSTALLED := $(PREFIX)/bin/radpt $(LIBDIR)/$(SOREAL) $(LIBDIR)/$(SONAME) $(LIBDI
 $(BUILD)/radpt-installed: $(CLI_OBJ) $(BUILD)/$(SOREAL)
 	$(CC) $(LDFLAGS) -o $@ $(CLI_OBJ) -L$(BUILD) -lradpt -Wl,-rpath,'$$ORIGIN/../lib' $(LDLIBS)
 
-# radpt.pc is written by install itself: it names the PREFIX installed to.
-PC_LINES := 'prefix=$(PREFIX)' 'libdir=$${prefix}/lib' 'includedir=$${prefix}/include' '' 'Name: radpt' \
+# radpt.pc is relocatable: its prefix is found from where the .pc file is
+# (${pcfiledir}, pkg-config and pkgconf both know it), so a DESTDIR or
+# moved install works with PKG_CONFIG_PATH alone (a fixed prefix=/usr
+# would even be dropped as a system directory and hide the staged headers).
+PC_LINES := 'prefix=$${pcfiledir}/../..' 'libdir=$${prefix}/lib' 'includedir=$${prefix}/include' '' 'Name: radpt' \
     'Description: radiosity and path tracing compared: the solver interface, scene and ray queries, plugins' \
     'Version: $(VERSION)' 'Cflags: -I$${includedir}' 'Libs: -L$${libdir} -lradpt -lm' 'Libs.private: $(LDLIBS)'
 
@@ -233,7 +236,7 @@ plugins: $(BUILD)/radpt-installed $(BUILD)/$(SOREAL) $(BUILD)/libradpt.a $(BUILD
 	@$(MAKE) --no-print-directory install DESTDIR=$(STAGE) PREFIX=/usr >/dev/null
 	@mkdir -p $(BUILD)/plugins
 	@for e in $(EXAMPLES); do \
-	    PKG_CONFIG_LIBDIR=$(STAGE)/usr/lib/pkgconfig PKG_CONFIG_SYSROOT_DIR=$(STAGE) \
+	    PKG_CONFIG_LIBDIR=$(STAGE)/usr/lib/pkgconfig \
 	    $(MAKE) --no-print-directory -C examples/plugins/$$e OUT=$(CURDIR)/$(BUILD)/plugins || exit 1; done
 
 # Fuzzing with libFuzzer (clang): the scene parser and mesh import, each
