@@ -100,3 +100,16 @@ size_t rp_count_lines(const char *s)
         n += *s == '\n';
     return n;
 }
+
+int rp_test_tmpdir(char *buf, size_t n, const char *prefix)
+{
+    snprintf(buf, n, "/tmp/%s.XXXXXX", prefix);
+    return mkdtemp(buf) ? 0 : -1;
+}
+
+int rp_test_rmtree(const char *dir)
+{
+    char cmd[1200];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    return system(cmd);
+}

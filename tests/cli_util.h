@@ -28,6 +28,11 @@ double rp_json_number_after(const char *text, const char *anchor, const char *ke
 /* A whole file, NUL-terminated (malloc'd), or NULL if it cannot be read. */
 char *rp_read_file(const char *path);
 
+/* A fresh directory /tmp/PREFIX.XXXXXX in buf; 0, or -1 on failure. */
+int rp_test_tmpdir(char *buf, size_t n, const char *prefix);
+/* rm -rf dir; 0 on success. */
+int rp_test_rmtree(const char *dir);
+
 /* Number of lines in s. */
 size_t rp_count_lines(const char *s);
 

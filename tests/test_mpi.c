@@ -23,15 +23,12 @@ static char tmpdir[64];
 
 static void make_tmpdir(void)
 {
-    snprintf(tmpdir, sizeof tmpdir, "/tmp/rp_mpi_test.XXXXXX");
-    cr_assert_not_null(mkdtemp(tmpdir));
+    cr_assert_eq(rp_test_tmpdir(tmpdir, sizeof tmpdir, "rp_mpi_test"), 0);
 }
 
 static void remove_tmpdir(void)
 {
-    char cmd[128];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
-    cr_expect_eq(system(cmd), 0);
+    cr_expect_eq(rp_test_rmtree(tmpdir), 0);
 }
 
 /* 1 when every channel of every pixel of the two EXRs is the same float. */

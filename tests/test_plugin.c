@@ -30,15 +30,12 @@ static char tmpdir[64];
 
 static void make_tmpdir(void)
 {
-    snprintf(tmpdir, sizeof tmpdir, "/tmp/rp_plugin_test.XXXXXX");
-    cr_assert_not_null(mkdtemp(tmpdir));
+    cr_assert_eq(rp_test_tmpdir(tmpdir, sizeof tmpdir, "rp_plugin_test"), 0);
 }
 
 static void remove_tmpdir(void)
 {
-    char cmd[128];
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", tmpdir);
-    cr_expect_eq(system(cmd), 0);
+    cr_expect_eq(rp_test_rmtree(tmpdir), 0);
 }
 
 TestSuite(plugin, .init = make_tmpdir, .fini = remove_tmpdir, .timeout = 300);

@@ -781,8 +781,11 @@ static void bench_log_result(rp_bench *b, const rp_trial *run)
             snprintf(rmse, sizeof rmse, "%.4g", cp->rmse);
         if (isfinite(cp->surface_err))
             snprintf(surf, sizeof surf, "%.4g", cp->surface_err);
-        bench_log(b, "  %s seed %llu: %.3g s, RMSE %s, surface error %s (rank %d, %d threads)", m->text,
-                  (unsigned long long)run->seed, cp->wall_s, rmse, surf, run->rank, run->threads);
+        char where[64] = ""; /* under mpirun: the rank it ran on */
+        if (rp_mpi_world())
+            snprintf(where, sizeof where, " (rank %d, %d threads)", run->rank, run->threads);
+        bench_log(b, "  %s seed %llu: %.3g s, RMSE %s, surface error %s%s", m->text, (unsigned long long)run->seed,
+                  cp->wall_s, rmse, surf, where);
     }
 }
 
@@ -992,19 +995,9 @@ rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_r
             }
             run->method = i;
             b->nruns++;
-            if (run->status != RP_OK) {
+            if (run->status != RP_OK)
                 b->failures++;
-                bench_log(b, "%s seed %llu failed: %s", b->methods[i].text, (unsigned long long)seed, run->error);
-            } else if (run->ncp) {
-                const rp_checkpoint *cp = &run->cp[run->ncp - 1];
-                char rmse[32] = "n/a", surf[32] = "n/a";
-                if (isfinite(cp->rmse))
-                    snprintf(rmse, sizeof rmse, "%.4g", cp->rmse);
-                if (isfinite(cp->surface_err))
-                    snprintf(surf, sizeof surf, "%.4g", cp->surface_err);
-                bench_log(b, "  %s seed %llu: %.3g s, RMSE %s, surface error %s", b->methods[i].text,
-                          (unsigned long long)seed, cp->wall_s, rmse, surf);
-            }
+            bench_log_result(b, run);
             if (b->params.on_run)
                 b->params.on_run(b->params.on_run_ctx, b);
         }
