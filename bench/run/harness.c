@@ -699,12 +699,12 @@ typedef struct bench_slot {
 } bench_slot;
 
 /* Sends slot k's outcome from `holder` to every rank: head {state, count
- * of numbers, error bytes, image floats}, state 1 a finished run, 0 none
+ * of numbers, image floats, status}, state 1 a finished run, 0 none
  * (not run: interrupted), -1 the harness failed (its message follows). */
 static rp_status spread_run(rp_bench *b, const rp_comm *comm, int holder, rp_trial *run, int state,
                             rp_status hst, const rp_error *herr, rp_error *err)
 {
-    double head[5] = {0};
+    double head[4] = {0};
     double *v = NULL;
     size_t n = 0;
     if (comm->rank == holder) {
@@ -712,9 +712,8 @@ static rp_status spread_run(rp_bench *b, const rp_comm *comm, int holder, rp_tri
             state = -1, hst = RP_ERR_NOMEM;
         head[0] = state;
         head[1] = (double)n;
-        head[2] = state == -1 ? (double)sizeof herr->message : (double)sizeof run->error;
-        head[3] = state == 1 && run->image ? (double)image_values(b) : 0;
-        head[4] = hst;
+        head[2] = state == 1 && run->image ? (double)image_values(b) : 0;
+        head[3] = hst;
     }
     rp_comm_bcast(comm, head, sizeof head, holder);
     state = (int)head[0];
@@ -729,10 +728,10 @@ static rp_status spread_run(rp_bench *b, const rp_comm *comm, int holder, rp_tri
         rp_comm_bcast(comm, e.message, sizeof e.message, holder);
         e.message[sizeof e.message - 1] = '\0';
         free(v);
-        return rp_error_set(err, (rp_status)head[4], "%s", e.message);
+        return rp_error_set(err, (rp_status)head[3], "%s", e.message);
     }
     n = (size_t)head[1];
-    size_t nimage = (size_t)head[3];
+    size_t nimage = (size_t)head[2];
     if (comm->rank != holder) {
         v = malloc((n ? n : 1) * sizeof *v);
         memset(run, 0, sizeof *run);
@@ -926,81 +925,69 @@ rp_status rp_bench_run(const rp_scene *scene, const char *scene_name, const rp_r
         spec_copy(&b->methods[i], &methods[i]);
     b->planned = nruns;
     b->threads = b->params.run.threads ? b->params.run.threads : omp_get_max_threads();
-    const rp_comm *comm = rp_mpi_world();
-    if (comm) {
-        bench_slot *slots = calloc(nruns ? nruns : 1, sizeof *slots);
-        size_t k = 0;
-        for (size_t i = 0; slots && i < nmethods; i++) {
-            unsigned ns = rp_method_is_monte_carlo(&b->methods[i]) ? b->params.nseeds : 1;
-            for (unsigned s = 0; s < ns; s++, k++) {
-                slots[k].method = i;
-                slots[k].seed = b->params.seed + s;
-                slots[k].keep_image = b->params.run.keep_image && s == 0; /* the sheet shows the first seed */
-                snprintf(slots[k].key, sizeof slots[k].key, "%s%s seed %llu",
-                         b->params.journal_prefix ? b->params.journal_prefix : "", b->methods[i].text,
-                         (unsigned long long)slots[k].seed);
-            }
-        }
-        rp_status st = slots ? bench_spread(b, comm, slots, nruns, err)
-                             : rp_error_set(err, RP_ERR_NOMEM, "out of memory");
-        free(slots);
-        if (st != RP_OK) {
-            rp_bench_destroy(b);
-            return st;
-        }
-        rp_bench_summarise(b);
-        *out = b;
-        return RP_OK;
+    /* the study's runs in order: methods, then seeds */
+    bench_slot *slots = calloc(nruns ? nruns : 1, sizeof *slots);
+    if (!slots) {
+        rp_bench_destroy(b);
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     }
-    size_t k = 0;
-    for (size_t i = 0; i < nmethods && !b->interrupted; i++) {
+    for (size_t i = 0, k = 0; i < nmethods; i++) {
         unsigned ns = rp_method_is_monte_carlo(&b->methods[i]) ? b->params.nseeds : 1;
-        for (unsigned s = 0; s < ns && !b->interrupted; s++, k++) {
-            rp_trial *run = &b->runs[b->nruns];
-            uint64_t seed = b->params.seed + s;
-            rp_harness_params hp = b->params.run;
-            /* the image sheet shows the first seed */
-            hp.keep_image = hp.keep_image && s == 0;
-            char key[600];
-            snprintf(key, sizeof key, "%s%s seed %llu", b->params.journal_prefix ? b->params.journal_prefix : "",
-                     b->methods[i].text, (unsigned long long)seed);
-            rp_status st = trial_get(b, key, seed, hp.keep_image, run, err);
-            if (st == RP_OK && run->cp) {
-                b->resumed++;
-                bench_log(b, "run %zu of %zu: %s seed %llu: recorded, read back from %s", k + 1, nruns,
-                          b->methods[i].text, (unsigned long long)seed, rp_journal_path(b->params.journal));
-            } else if (st == RP_OK) {
-                if (rp_cancelled(hp.cancel)) {
-                    b->interrupted = 1;
-                    break;
-                }
-                double eta = (double)(nruns - k) * b->params.run.budget;
-                bench_log(b, "run %zu of %zu: %s, seed %llu, budget %g %s (ETA: at most %.3g %s for this and the rest)", k + 1,
-                          nruns, b->methods[i].text, (unsigned long long)seed, b->params.run.budget,
-                          b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s", eta,
-                          b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s");
-                st = rp_harness_run(scene, ref, &b->methods[i], seed, &hp, run, err);
-                if (st == RP_OK && run->status == RP_ERR_INTERRUPTED) {
-                    /* not finished: not recorded, not counted */
-                    rp_trial_free(run);
-                    b->interrupted = 1;
-                    break;
-                }
-                if (st == RP_OK)
-                    st = trial_put(b, key, run, err);
-            }
-            if (st != RP_OK) {
-                rp_bench_destroy(b);
-                return st;
-            }
-            run->method = i;
-            b->nruns++;
-            if (run->status != RP_OK)
-                b->failures++;
-            bench_log_result(b, run);
-            if (b->params.on_run)
-                b->params.on_run(b->params.on_run_ctx, b);
+        for (unsigned s = 0; s < ns; s++, k++) {
+            slots[k].method = i;
+            slots[k].seed = b->params.seed + s;
+            slots[k].keep_image = b->params.run.keep_image && s == 0; /* the sheet shows the first seed */
+            snprintf(slots[k].key, sizeof slots[k].key, "%s%s seed %llu",
+                     b->params.journal_prefix ? b->params.journal_prefix : "", b->methods[i].text,
+                     (unsigned long long)slots[k].seed);
         }
+    }
+    const rp_comm *comm = rp_mpi_world();
+    rp_status st = comm ? bench_spread(b, comm, slots, nruns, err) : RP_OK;
+    for (size_t k = 0; !comm && k < nruns && !b->interrupted; k++) {
+        const bench_slot *sl = &slots[k];
+        const rp_method_spec *m = &b->methods[sl->method];
+        rp_trial *run = &b->runs[b->nruns];
+        rp_harness_params hp = b->params.run;
+        hp.keep_image = sl->keep_image;
+        st = trial_get(b, sl->key, sl->seed, hp.keep_image, run, err);
+        if (st == RP_OK && run->cp) {
+            b->resumed++;
+            bench_log(b, "run %zu of %zu: %s seed %llu: recorded, read back from %s", k + 1, nruns, m->text,
+                      (unsigned long long)sl->seed, rp_journal_path(b->params.journal));
+        } else if (st == RP_OK) {
+            if (rp_cancelled(hp.cancel)) {
+                b->interrupted = 1;
+                break;
+            }
+            double eta = (double)(nruns - k) * b->params.run.budget;
+            const char *unit = b->params.run.schedule == RP_SCHEDULE_ITERATIONS ? "iterations" : "s";
+            bench_log(b, "run %zu of %zu: %s, seed %llu, budget %g %s (ETA: at most %.3g %s for this and the rest)",
+                      k + 1, nruns, m->text, (unsigned long long)sl->seed, b->params.run.budget, unit, eta, unit);
+            st = rp_harness_run(scene, ref, m, sl->seed, &hp, run, err);
+            if (st == RP_OK && run->status == RP_ERR_INTERRUPTED) {
+                /* not finished: not recorded, not counted */
+                rp_trial_free(run);
+                b->interrupted = 1;
+                break;
+            }
+            if (st == RP_OK)
+                st = trial_put(b, sl->key, run, err);
+        }
+        if (st != RP_OK)
+            break;
+        run->method = sl->method;
+        b->nruns++;
+        if (run->status != RP_OK)
+            b->failures++;
+        bench_log_result(b, run);
+        if (b->params.on_run)
+            b->params.on_run(b->params.on_run_ctx, b);
+    }
+    free(slots);
+    if (st != RP_OK) {
+        rp_bench_destroy(b);
+        return st;
     }
     rp_bench_summarise(b);
     *out = b;
