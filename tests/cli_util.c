@@ -93,6 +93,27 @@ double rp_json_number_after(const char *text, const char *anchor, const char *ke
     return strtod(p + strlen(pat), NULL);
 }
 
+size_t rp_json_arrays(const char *text, const char *key, double *out, size_t max)
+{
+    char pat[128];
+    snprintf(pat, sizeof pat, "\"%s\": [", key);
+    size_t n = 0;
+    for (const char *p = strstr(text, pat); p && n < max; p = strstr(p, pat)) {
+        p += strlen(pat);
+        while (*p && *p != ']' && n < max) {
+            char *end;
+            double v = strtod(p, &end);
+            if (end == p)
+                break;
+            out[n++] = v;
+            p = end;
+            while (*p == ',' || *p == ' ')
+                p++;
+        }
+    }
+    return n;
+}
+
 size_t rp_count_lines(const char *s)
 {
     size_t n = 0;

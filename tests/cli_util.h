@@ -25,6 +25,10 @@ rp_run rp_run_radpt_env(const char *env, const char *args);
  * of anchor (a string that must occur in text); NAN if absent. */
 double rp_json_number_after(const char *text, const char *anchor, const char *key);
 
+/* Every number of every "key": [...] array in text, in order, into out
+ * (at most max); returns how many. */
+size_t rp_json_arrays(const char *text, const char *key, double *out, size_t max);
+
 /* A whole file, NUL-terminated (malloc'd), or NULL if it cannot be read. */
 char *rp_read_file(const char *path);
 

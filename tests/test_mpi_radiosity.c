@@ -32,29 +32,6 @@ static rp_run run_ranks(int ranks, const char *args)
     return ranks > 0 ? rp_run_radpt_mpi(ranks, args) : rp_run_radpt(args);
 }
 
-/* Every number of every "radiance": [...] array of probe's JSON, in
- * order; returns the count. */
-static size_t radiances(const char *json, double *v, size_t max)
-{
-    size_t k = 0;
-    const char *p = json;
-    while ((p = strstr(p, "\"radiance\": [")) != NULL) {
-        p += strlen("\"radiance\": [");
-        while (*p && *p != ']') {
-            char *end;
-            double x = strtod(p, &end);
-            if (end == p)
-                break;
-            cr_assert_lt(k, max);
-            v[k++] = x;
-            p = end;
-            while (*p == ',' || *p == ' ')
-                p++;
-        }
-    }
-    return k;
-}
-
 /* The text of "key": value in json (up to the next comma), for exact
  * comparison of printed numbers. */
 static void field(const char *json, const char *key, char *out, size_t size)
@@ -83,7 +60,8 @@ static void probe(int ranks, const char *args, probe_result *r)
     snprintf(cmd, sizeof cmd, "probe %s --surface-averages --json", args);
     rp_run run = run_ranks(ranks, cmd);
     cr_assert_eq(run.status, 0, "%d ranks: %s: %s", ranks, cmd, run.err);
-    r->count = radiances(run.out, r->v, MAX_VALUES);
+    r->count = rp_json_arrays(run.out, "radiance", r->v, MAX_VALUES);
+    cr_assert_lt(r->count, MAX_VALUES);
     cr_assert_gt(r->count, 0, "%s", run.out);
     field(run.out, "samples", r->samples, sizeof r->samples);
     field(run.out, "residual", r->residual, sizeof r->residual);

@@ -223,29 +223,6 @@ Test(plugin, camera_projection_inverts_camera_rays)
 
 #define LIGHTTRACE RP_BUILD_DIR "/plugins/lighttrace.so"
 
-/* Every "radiance": [...] and "stderr": [...] value of probe --json, in
- * order; returns how many. */
-static size_t json_values(const char *json, const char *key, double *out, size_t max)
-{
-    char pat[64];
-    snprintf(pat, sizeof pat, "\"%s\": [", key);
-    size_t n = 0;
-    for (const char *p = strstr(json, pat); p && n < max; p = strstr(p, pat)) {
-        p += strlen(pat);
-        char *end;
-        for (;;) {
-            double v = strtod(p, &end);
-            if (end == p || n >= max)
-                break;
-            out[n++] = v;
-            p = end;
-            while (*p == ',' || *p == ' ')
-                p++;
-        }
-    }
-    return n;
-}
-
 static void lighttrace_agrees(const char *scene, int batches, int samples)
 {
     char args[512];
@@ -257,10 +234,10 @@ static void lighttrace_agrees(const char *scene, int batches, int samples)
     rp_run pt = rp_run_radpt(args);
     cr_assert_eq(pt.status, 0, "%s", pt.err);
     double a[256], sa[256], b[256], sb[256];
-    size_t n = json_values(lt.out, "radiance", a, 256);
-    cr_assert(n > 0 && n == json_values(lt.out, "stderr", sa, 256), "%s", lt.out);
-    cr_assert_eq(json_values(pt.out, "radiance", b, 256), n);
-    cr_assert_eq(json_values(pt.out, "stderr", sb, 256), n);
+    size_t n = rp_json_arrays(lt.out, "radiance", a, 256);
+    cr_assert(n > 0 && n == rp_json_arrays(lt.out, "stderr", sa, 256), "%s", lt.out);
+    cr_assert_eq(rp_json_arrays(pt.out, "radiance", b, 256), n);
+    cr_assert_eq(rp_json_arrays(pt.out, "stderr", sb, 256), n);
     double worst = 0;
     for (size_t i = 0; i < n; i++) {
         double se = sqrt(sa[i] * sa[i] + sb[i] * sb[i]);
