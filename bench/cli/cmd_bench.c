@@ -616,7 +616,7 @@ int rp_cmd_experiment(int argc, char **argv)
     rp_cli_catch_signals(on_study_signal);
     rp_cli_note("experiment %s%s: %s", e->name, p.quick ? " (quick)" : "", e->summary);
     if (st == RP_OK)
-        st = e->run(&p, &err);
+        st = rp_experiment_run(&p, &err);
     front_done(&fr);
     rp_journal_close(journal);
     if (st == RP_OK)

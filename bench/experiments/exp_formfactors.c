@@ -149,7 +149,7 @@ static rp_status ff_unit(const rp_experiment_params *p, const ff_setup *s, const
              s->name, s->exact, rp_ff_method_name(prm->method), prm->tolerance, (unsigned)prm->samples,
              (unsigned)prm->resolution, nseeds);
     double rec[3];
-    if (rp_journal_get_doubles(p->journal, key, rec, 3)) {
+    if (rp_exp_unit(p, key, rec, 3)) { /* recorded, or another rank's */
         *F = rec[0];
         *rel_rms = rec[1];
         *seconds = rec[2];

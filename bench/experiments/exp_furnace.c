@@ -162,7 +162,7 @@ rp_status rp_exp_furnace(const rp_experiment_params *p, rp_error *err)
             char key[160];
             snprintf(key, sizeof key, "furnace rho %.17g %s tol %.17g budget %.17g", rhos[r], specs[i], tol, budget);
             double v[8];
-            if (rp_journal_get_doubles(p->journal, key, v, 8)) {
+            if (rp_exp_unit(p, key, v, 8)) { /* recorded, or another rank's */
                 row->reached = (int)v[0];
                 row->seconds = v[1];
                 row->iterations = v[2];
@@ -170,7 +170,6 @@ rp_status rp_exp_furnace(const rp_experiment_params *p, rp_error *err)
                 row->steps = v[4];
                 row->error = v[5];
                 row->rel_stderr = v[6];
-                rp_exp_log(p, "furnace rho %g: %s: recorded, read back from the journal", rhos[r], specs[i]);
                 nrows++;
                 continue;
             }

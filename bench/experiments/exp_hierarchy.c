@@ -43,7 +43,7 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
         char key[96];
         snprintf(key, sizeof key, "hierarchy links bf-epsilon %.17g", bf[k]);
         double rec[3];
-        if (rp_journal_get_doubles(p->journal, key, rec, 3)) {
+        if (rp_exp_unit(p, key, rec, 3)) { /* recorded, or another rank's */
             leaves[k] = rec[0];
             links[k] = rec[1];
             seconds[k] = rec[2];
@@ -79,12 +79,8 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
             seconds[k] = tot.wall_s;
             double v[3] = {leaves[k], links[k], seconds[k]};
             st = rp_journal_put_doubles(p->journal, key, v, 3, err);
-            if (p->log) {
-                char line[160];
-                snprintf(line, sizeof line, "  hierarchical bf-epsilon %g: %zu leaves, %zu links, %.2f s", bf[k],
-                         hs.leaves, hs.links, seconds[k]);
-                p->log(p->log_ctx, line);
-            }
+            rp_exp_log(p, "  hierarchical bf-epsilon %g: %zu leaves, %zu links, %.2f s", bf[k], hs.leaves, hs.links,
+                       seconds[k]);
         }
         rp_solver_destroy(s);
     }
@@ -123,8 +119,8 @@ static rp_status hierarchy_links(const rp_experiment_params *p, const rp_scene *
         if ((st = rp_out_close(&o, 1, err)) != RP_OK)
             return st;
         rp_error gerr;
-        if (rp_gnuplot_run(p->out_dir, "links.gp", &gerr) != RP_OK && p->log)
-            p->log(p->log_ctx, gerr.message);
+        if (rp_gnuplot_run(p->out_dir, "links.gp", &gerr) != RP_OK)
+            rp_exp_log(p, "%s", gerr.message);
     }
 
     if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "links.md"), err)) != RP_OK)
@@ -213,7 +209,7 @@ static rp_status hierarchy_form_factors(const rp_experiment_params *p, const rp_
         char jkey[96];
         snprintf(jkey, sizeof jkey, "hierarchy form factors %s %s=%s", t->name, key, value);
         double rec[3];
-        if (rp_journal_get_doubles(p->journal, jkey, rec, 3)) {
+        if (rp_exp_unit(p, jkey, rec, 3)) { /* recorded, or another rank's */
             rows[k].form_factors = rec[0];
             rows[k].error = rec[1];
             rows[k].seconds = rec[2];
@@ -231,13 +227,9 @@ static rp_status hierarchy_form_factors(const rp_experiment_params *p, const rp_
     }
     if (st != RP_OK)
         return st;
-    if (p->log)
-        for (size_t k = 0; k <= n; k++) {
-            char line[256];
-            snprintf(line, sizeof line, "  %.63s: %.4g form factors, surface error %.3f%%, %.2f s", rows[k].spec,
-                     rows[k].form_factors, 100 * rows[k].error, rows[k].seconds);
-            p->log(p->log_ctx, line);
-        }
+    for (size_t k = 0; k <= n; k++)
+        rp_exp_log(p, "  %.63s: %.4g form factors, surface error %.3f%%, %.2f s", rows[k].spec, rows[k].form_factors,
+                   100 * rows[k].error, rows[k].seconds);
     char path[1200];
     rp_out o;
     if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "form_factors.csv"), err)) != RP_OK)

@@ -55,7 +55,8 @@ rp_reference_params rp_exp_ref_params(const rp_experiment_params *p, unsigned lo
 /* Gets the scene's reference, runs a bench over a method list with
  * checkpoints at budget x 2^-k, k < levels (budget in seconds or, with
  * RP_SCHEDULE_ITERATIONS, in iterations) and writes the standard output
- * into dir; bench_out and ref_out (may be NULL) receive the bench and the
+ * into dir (in rp_experiment_run's hand-out pass, only the reference:
+ * *bench_out is then NULL); bench_out and ref_out (may be NULL) receive the bench and the
  * reference. */
 rp_status rp_exp_run_bench_scheduled(const rp_experiment_params *p, const rp_scene *scene, const char *scene_name,
                                      const char *list, rp_schedule schedule, double budget, unsigned levels,
@@ -66,6 +67,23 @@ rp_status rp_exp_run_bench(const rp_experiment_params *p, const rp_scene *scene,
                            const char *list, double budget, unsigned nseeds, unsigned long ref_spp,
                            const rp_bench_output *out, const char *dir, rp_bench **bench_out,
                            rp_reference **ref_out, rp_error *err);
+
+/* A unit of an experiment's own tables (one row: a method at one
+ * setting), named by key in the study's journal.  Returns
+ *    1  recorded: read back (v: its n numbers; v NULL: the caller reads
+ *       the text payload with rp_journal_get), not run again;
+ *    0  to be computed here, then recorded with rp_journal_put_doubles
+ *       (or rp_journal_put) under the same key;
+ *   -1  in rp_experiment_run's hand-out pass, a unit another rank
+ *       computes: skip it (v is filled with NaN; nothing is written in
+ *       that pass, and the next pass reads it back).
+ * The units an experiment asks for, and their order, must not depend on
+ * the numbers of other units, so that every rank counts the same units
+ * (were they to differ, the second pass computes what is missing). */
+int rp_exp_unit(const rp_experiment_params *p, const char *key, double *v, size_t n);
+/* 1 in the hand-out pass (the numbers of units other ranks own are NaN:
+ * no conclusion may be drawn from them). */
+int rp_exp_handing_out(const rp_experiment_params *p);
 
 /* A CSV number; not reached or not measured: an empty field. */
 void rp_exp_fnum(FILE *f, double v);

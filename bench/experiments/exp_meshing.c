@@ -72,14 +72,13 @@ rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err)
             char key[200];
             snprintf(key, sizeof key, "meshing %s budget %.17g", spec, budget);
             double rec[4];
-            if (rp_journal_get_doubles(p->journal, key, rec, 4)) {
+            if (rp_exp_unit(p, key, rec, 4)) { /* recorded, or another rank's */
                 w->rmse[r] = rec[0];
                 if (r == 0) {
                     w->surface_err = rec[1];
                     w->seconds = rec[2];
                     w->converged = (int)rec[3];
                 }
-                rp_exp_log(p, "meshing: %s: recorded, read back from the journal", spec);
                 continue;
             }
             if (rp_cancelled(p->cancel)) {

@@ -51,7 +51,9 @@ typedef struct stab {
  * (the experiment then fails). */
 static void put(stab *S, FILE *f, const char *fmt, double v, const char *what)
 {
-    if (isfinite(v)) {
+    /* in the hand-out pass the units of other ranks are NaN, and nothing
+     * written is kept (rp_exp_unit) */
+    if (isfinite(v) || rp_exp_handing_out(S->p)) {
         fprintf(f, fmt, v);
         return;
     }
@@ -177,6 +179,77 @@ static int stab_after_step(void *ctx, rp_solver *s, const rp_drive_totals *t, rp
     return sk->so->max_steps && t->steps >= sk->so->max_steps;
 }
 
+/* A run as a journal record: its counts, then the surface averages and
+ * their standard errors, then the image and its variance (each array only
+ * where the run wants it); doubles as %.17g and floats as %.9g, both of
+ * which read back bit-identical. */
+static char *srun_pack(const srun *r)
+{
+    char *buf = NULL;
+    size_t len = 0;
+    FILE *f = open_memstream(&buf, &len);
+    if (!f)
+        return NULL;
+    double head[8] = {r->seconds, r->rays, r->paths, r->iterations, r->ff, r->steps, r->converged, r->reached};
+    for (int i = 0; i < 8; i++)
+        fprintf(f, "%s%.17g", i ? " " : "", head[i]);
+    for (size_t i = 0; r->surf && i < r->ns * r->nb; i++)
+        fprintf(f, " %.17g %.17g", r->surf[i], r->se[i]);
+    for (size_t i = 0; r->img && i < r->npix * r->nb; i++)
+        fprintf(f, " %.9g %.9g", r->img[i], r->var[i]);
+    if (fclose(f) != 0) {
+        free(buf);
+        return NULL;
+    }
+    return buf;
+}
+
+/* Reads srun_pack's text into r (its arrays allocated for the same run);
+ * 0 when the text does not hold exactly those numbers. */
+static int srun_unpack(const char *text, srun *r)
+{
+    const char *p = text;
+    char *end;
+    double head[8];
+    for (int i = 0; i < 8; i++, p = end)
+        if (head[i] = strtod(p, &end), end == p)
+            return 0;
+    r->seconds = head[0];
+    r->rays = head[1];
+    r->paths = head[2];
+    r->iterations = head[3];
+    r->ff = head[4];
+    r->steps = head[5];
+    r->converged = (int)head[6];
+    r->reached = (int)head[7];
+    for (size_t i = 0; r->surf && i < r->ns * r->nb; i++) {
+        if (r->surf[i] = strtod(p, &end), end == p)
+            return 0;
+        if (r->se[i] = strtod(p = end, &end), end == p)
+            return 0;
+        p = end;
+    }
+    for (size_t i = 0; r->img && i < r->npix * r->nb; i++) {
+        if (r->img[i] = strtof(p, &end), end == p)
+            return 0;
+        if (r->var[i] = strtof(p = end, &end), end == p)
+            return 0;
+        p = end;
+    }
+    while (*p == ' ')
+        p++;
+    return *p == '\0';
+}
+
+static void srun_fill_nan(srun *r)
+{
+    r->seconds = r->rays = r->paths = r->iterations = r->ff = r->steps = NAN;
+    for (size_t i = 0; r->surf && i < r->ns * r->nb; i++)
+        r->surf[i] = r->se[i] = NAN;
+    for (size_t i = 0; r->img && i < r->npix * r->nb; i++)
+        r->img[i] = r->var[i] = NAN;
+}
+
 static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const sopt *so, srun *r, rp_error *err)
 {
     memset(r, 0, sizeof *r);
@@ -208,6 +281,29 @@ static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const so
         srun_free(r);
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     }
+    /* a run finished before an interruption is read back from the study's
+     * journal; in the hand-out pass, another rank's run is skipped */
+    char hash[17], key[400];
+    rp_scene_hash(sc, hash);
+    snprintf(key, sizeof key, "stability run %s scene %s want %u budget %.17g max-steps %lu exact %.17g tol %.17g "
+             "seed %llu", spec, hash, so->want, so->budget, so->max_steps, so->exact, so->tol,
+             (unsigned long long)o.seed);
+    int unit = rp_exp_unit(S->p, key, NULL, 0);
+    if (unit < 0) {
+        srun_fill_nan(r);
+        return RP_OK;
+    }
+    if (unit > 0) {
+        if (srun_unpack(rp_journal_get(S->p->journal, key), r))
+            return RP_OK;
+        srun_free(r);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: the record '%s' does not fit this run",
+                            rp_journal_path(S->p->journal), key);
+    }
+    if (rp_cancelled(S->p->cancel)) {
+        srun_free(r);
+        return rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+    }
     rp_solver *s = NULL;
     rp_drive_totals tot;
     memset(&tot, 0, sizeof tot);
@@ -234,6 +330,11 @@ static rp_status srun_do(stab *S, const rp_scene *sc, const char *spec, const so
     }
     rp_solver_destroy(s);
     rp_exp_log(S->p, "  %s: %.2f s solver time, %.0f steps", spec, r->seconds, r->steps);
+    if (st == RP_OK) {
+        char *text = srun_pack(r);
+        st = text ? rp_journal_put(S->p->journal, key, text, err) : rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+        free(text);
+    }
     if (st != RP_OK) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s", err ? err->message : "");
@@ -860,14 +961,31 @@ static rp_status corner_scene(stab *S, int perpendicular, double d, double max_e
 
 /* F from surface a to surface b, summed over their elements; RMS relative
  * error over seeds; seconds for the whole computation. */
-static rp_status corner_ff(const rp_scene *sc, const rp_mesh *mesh, const rp_ff_params *base, unsigned seeds,
-                           double exact, double *rel_rms, double *mean, double *secs, rp_error *err)
+static rp_status corner_ff(const rp_experiment_params *p, const rp_scene *sc, const rp_mesh *mesh,
+                           const rp_ff_params *base, unsigned seeds, double exact, double *rel_rms, double *mean,
+                           double *secs, rp_error *err)
 {
     uint32_t a0, na, b0, nbel;
     rp_mesh_surface_elements(mesh, rp_scene_find_surface(sc, "a"), &a0, &na);
     rp_mesh_surface_elements(mesh, rp_scene_find_surface(sc, "b"), &b0, &nbel);
     const rp_element *el = rp_mesh_elements(mesh);
     size_t n = rp_mesh_nelements(mesh);
+    /* recorded in the study's journal (the mesh named by its scene and its
+     * elements on a and b) */
+    char hash[17], key[300];
+    rp_scene_hash(sc, hash);
+    snprintf(key, sizeof key, "stability form factor scene %s elements %zu a %u b %u %s samples %u resolution %u "
+             "tolerance %.17g seeds %u exact %.17g", hash, n, (unsigned)na, (unsigned)nbel,
+             rp_ff_method_name(base->method), base->samples, base->resolution, base->tolerance, seeds, exact);
+    double rec[3];
+    if (rp_exp_unit(p, key, rec, 3)) { /* recorded, or another rank's */
+        *rel_rms = rec[0];
+        *mean = rec[1];
+        *secs = rec[2];
+        return RP_OK;
+    }
+    if (rp_cancelled(p->cancel))
+        return rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
     float *row = malloc(n * sizeof *row);
     if (!row)
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
@@ -903,6 +1021,10 @@ static rp_status corner_ff(const rp_scene *sc, const rp_mesh *mesh, const rp_ff_
     *rel_rms = sqrt(sq / seeds);
     *mean = sum / seeds;
     *secs = t / seeds;
+    if (st == RP_OK) {
+        double v[3] = {*rel_rms, *mean, *secs};
+        st = rp_journal_put_doubles(p->journal, key, v, 3, err);
+    }
     return st;
 }
 
@@ -979,7 +1101,7 @@ static rp_status sec_corner(stab *S, rp_error *err)
                                    .samples = methods[m].samples, .resolution = methods[m].res};
                 unsigned ns = methods[m].m == RP_FF_MONTECARLO ? seeds : 1;
                 double e, F, secs;
-                if ((st = corner_ff(sc, mesh, &fp, ns, exact, &e, &F, &secs, err)) != RP_OK)
+                if ((st = corner_ff(S->p, sc, mesh, &fp, ns, exact, &e, &F, &secs, err)) != RP_OK)
                     break;
                 put(S, f, " %.3g |", e, "corner error");
                 if (cfg == 0)
@@ -1043,7 +1165,7 @@ static rp_status sec_corner(stab *S, rp_error *err)
                                    .resolution = mc->res};
                 unsigned ns = mc->m == RP_FF_MONTECARLO ? seeds : 1;
                 double e, F, secs;
-                if ((st = corner_ff(sc, mesh, &fp, ns, exact, &e, &F, &secs, err)) != RP_OK)
+                if ((st = corner_ff(S->p, sc, mesh, &fp, ns, exact, &e, &F, &secs, err)) != RP_OK)
                     break;
                 put(S, f, " %.3g |", e, "corner subdivision error");
                 fprintf(o.f, "subdivision,%s,%g,%u,%s,%s,", cfg == 0 ? "perpendicular" : "parallel", d,

@@ -23,11 +23,16 @@
 #include "bench/experiments/exp_internal.h"
 #include "bench/run/load.h"
 #include "bench/run/log.h"
+#include "bench/run/mpi.h"
 
 /* ------------------------------------------------------------- helpers */
 
 void rp_exp_log(const rp_experiment_params *p, const char *fmt, ...)
 {
+    /* the hand-out pass logs only the units it computes (rp_exp_unit):
+     * the numbers of the others are not known there */
+    if (rp_exp_handing_out(p))
+        return;
     va_list ap;
     va_start(ap, fmt);
     rp_vlogf(p->log, p->log_ctx, fmt, ap);
@@ -101,7 +106,10 @@ rp_status rp_exp_run_bench_scheduled(const rp_experiment_params *p, const rp_sce
      * benches in one study do not share records */
     char prefix[600];
     snprintf(prefix, sizeof prefix, "bench %s | ", list);
-    if (st == RP_OK) {
+    /* a bench hands out its runs itself: in rp_experiment_run's hand-out
+     * pass only the reference is made, and the bench runs in the next */
+    int later = rp_exp_handing_out(p);
+    if (st == RP_OK && !later) {
         rp_bench_params bp = {.size = sizeof bp, .nseeds = nseeds, .seed = 1, .log = p->log, .log_ctx = p->log_ctx,
                               .journal = p->journal, .journal_prefix = prefix, .image_dir = dir};
         bp.run = (rp_harness_params){.size = sizeof bp.run, .budget = budget, .levels = levels,
@@ -110,7 +118,7 @@ rp_status rp_exp_run_bench_scheduled(const rp_experiment_params *p, const rp_sce
                                      .cancel = p->cancel};
         st = rp_bench_run(scene, scene_name, ref, methods, n, &bp, &b, err);
     }
-    if (st == RP_OK) {
+    if (st == RP_OK && !later) {
         char note[256];
         rp_bench_output o = *out;
         if (!o.exposure)
@@ -167,6 +175,159 @@ rp_status rp_exp_draw(const rp_experiment_params *p, const char *body, char *not
         rp_exp_log(p, "%s", note);
     }
     return RP_OK;
+}
+
+/* ------------------------------------------------ units and hand-out */
+
+/* rp_experiment_run's state while it hands an experiment's units out to
+ * ranks (pass 0) and reads them back (pass 1). */
+struct rp_exp_handout {
+    const rp_comm *comm;
+    int pass;
+    size_t next;     /* pass 0: units counted so far (those not recorded) */
+    size_t mine;     /* pass 0: units this rank computed */
+    size_t last;     /* pass 0: index of the last unit this rank took */
+};
+
+int rp_exp_handing_out(const rp_experiment_params *p)
+{
+    return p->handout && p->handout->pass == 0;
+}
+
+int rp_exp_unit(const rp_experiment_params *p, const char *key, double *v, size_t n)
+{
+    int recorded = v ? rp_journal_get_doubles(p->journal, key, v, n) : rp_journal_get(p->journal, key) != NULL;
+    if (recorded) {
+        /* in the pass after a hand-out every unit is recorded: only a
+         * resumed study's units are news */
+        if (!p->handout)
+            rp_exp_log(p, "%s: recorded, read back from the journal", key);
+        return 1;
+    }
+    if (!rp_exp_handing_out(p))
+        return 0;
+    struct rp_exp_handout *h = p->handout;
+    size_t k = h->next++;
+    if (!rp_comm_owns(h->comm, k)) {
+        for (size_t i = 0; v && i < n; i++)
+            v[i] = NAN;
+        return -1;
+    }
+    h->mine++;
+    h->last = k;
+    rp_logf(p->log, p->log_ctx, "unit %zu: %s", k + 1, key);
+    return 0;
+}
+
+/* Puts the records that each rank added to its journal since record mark
+ * into every other rank's journal (rank 0's writes them to disk), rank by
+ * rank in rank order.  Collective. */
+static rp_status handout_exchange(rp_journal *j, const rp_comm *c, size_t mark, size_t *received, rp_error *err)
+{
+    rp_status st = RP_OK;
+    size_t mine = rp_journal_count(j);
+    *received = 0;
+    for (int r = 0; r < c->size; r++) {
+        char *buf = NULL;
+        size_t len = 0;
+        if (c->rank == r) {
+            FILE *f = open_memstream(&buf, &len);
+            for (size_t i = mark; f && i < mine; i++) {
+                const char *key, *payload;
+                rp_journal_record(j, i, &key, &payload);
+                fprintf(f, "%s\t%s\n", key, payload);
+            }
+            if (!f || fclose(f) != 0) {
+                free(buf);
+                buf = NULL;
+                len = 0;
+            }
+        }
+        double size = (double)len;
+        rp_comm_bcast(c, &size, sizeof size, r);
+        len = (size_t)size;
+        double short_of_memory = 0;
+        if (c->rank != r && len && !(buf = malloc(len)))
+            short_of_memory = 1;
+        rp_comm_max(c, &short_of_memory, 1);
+        if (short_of_memory) {
+            free(buf);
+            return rp_error_set(err, RP_ERR_NOMEM, "out of memory collecting the ranks' journal records");
+        }
+        if (len)
+            rp_comm_bcast(c, buf, len, r);
+        for (char *line = buf; c->rank != r && st == RP_OK && line < buf + len;) {
+            char *nl = memchr(line, '\n', (size_t)(buf + len - line));
+            char *tab = nl ? memchr(line, '\t', (size_t)(nl - line)) : NULL;
+            if (!tab)
+                break;
+            *tab = *nl = '\0';
+            st = rp_journal_put(j, line, tab + 1, err);
+            (*received)++;
+            line = nl + 1;
+        }
+        free(buf);
+    }
+    return st;
+}
+
+/* After the hand-out pass: the error a single process would have given
+ * is the one of the earliest unit that failed.  The ranks agree on it
+ * (the failing rank with the lowest unit index tells the others). */
+static rp_status handout_agree(const rp_comm *c, const struct rp_exp_handout *h, rp_status st, rp_error *err)
+{
+    int failed = st != RP_OK && st != RP_ERR_INTERRUPTED;
+    double v[2] = {failed ? -(double)h->last : -INFINITY, 0};
+    rp_comm_max(c, v, 1);
+    if (v[0] == -INFINITY)
+        return RP_OK;
+    v[1] = failed && -(double)h->last == v[0] ? -(double)c->rank : -INFINITY;
+    rp_comm_max(c, &v[1], 1);
+    int holder = (int)-v[1];
+    struct {
+        int status;
+        char message[sizeof err->message];
+    } e = {0};
+    if (c->rank == holder) {
+        e.status = st;
+        snprintf(e.message, sizeof e.message, "%s", err->message);
+    }
+    rp_comm_bcast(c, &e, sizeof e, holder);
+    return rp_error_set(err, (rp_status)e.status, "%s", e.message);
+}
+
+rp_status rp_experiment_run(const rp_experiment_params *p, rp_error *err)
+{
+    const rp_experiment *e = p->experiment;
+    const rp_comm *comm = rp_mpi_world();
+    if (!e->own_units || !p->journal || rp_comm_size(comm) < 2)
+        return e->run(p, err);
+    struct rp_exp_handout h = {.comm = comm};
+    rp_experiment_params q = *p;
+    q.handout = &h;
+    size_t mark = rp_journal_count(p->journal);
+    rp_exp_log(p, "experiment %s: handing out its units to %d ranks", e->name, comm->size);
+    /* pass 0: this rank's units, nothing written into the study's
+     * directory (the journal, opened before, still records them; the
+     * reference cache, elsewhere, is written) */
+    rp_files_discard_under(p->out_dir);
+    rp_status st = e->run(&q, err);
+    rp_files_discard_under(NULL);
+    st = handout_agree(comm, &h, st, err);
+    size_t received = 0;
+    rp_error xerr;
+    rp_status xst = handout_exchange(p->journal, comm, mark, &received, &xerr);
+    if (xst != RP_OK && st == RP_OK) {
+        *err = xerr;
+        st = xst;
+    }
+    if (st != RP_OK)
+        return st;
+    rp_exp_log(p, "experiment %s: this rank computed %zu of %zu units, %zu came from the other ranks", e->name,
+               h.mine, h.next, received);
+    /* pass 1: everything read back (a unit no rank reached, here computed) */
+    h.pass = 1;
+    return e->run(&q, err);
 }
 
 /* A CSV number; not reached or not measured: an empty field. */
@@ -302,12 +463,14 @@ static const rp_experiment experiments[] = {
               "tolerance grow like 1 / (1 - rho)",
      .quick = {2.0, 0, 0, NULL},
      .full = {20.0, 0, 0, NULL},
+     .own_units = 1,
      .run = rp_exp_furnace},
     {.name = "formfactors",
      .summary = "analytic, Monte Carlo and hemicube form factors against Howell's closed forms",
      .scenes = "rectangle pairs built in memory (Howell C-11 and C-14)",
      .claim = "the analytic form factor equals Howell's closed forms; Monte Carlo error falls as N^-1/2; the "
               "hemicube's error is bounded by its resolution",
+     .own_units = 1,
      .run = rp_exp_formfactors},
     {.name = "meshing",
      .summary = "radiosity error against element size, observed order",
@@ -316,6 +479,7 @@ static const rp_experiment experiments[] = {
               "Gouraud reconstruction",
      .quick = {20.0, 0, 256, NULL},
      .full = {300.0, 0, 2048, NULL},
+     .own_units = 1,
      .run = rp_exp_meshing},
     {.name = "progressive",
      .summary = "progressive radiosity with and without ambient term and overshooting: error per shot",
@@ -337,12 +501,14 @@ static const rp_experiment experiments[] = {
               "about linearly with its leaves, not quadratically",
      .quick = {2.0, 1, 256, "hierarchical,gauss-seidel:elements=250"},
      .full = {20.0, 1, 2048, "hierarchical,gauss-seidel:elements=1000,southwell:elements=1000"},
+     .own_units = 1,
      .run = rp_exp_hierarchy},
     {.name = "stability",
      .summary = "the stability atlas: each method pushed past its comfort zone (reflectance near 1, tiny lights, "
                 "corners, contact, shadows, thin geometry, non-physical input)",
      .scenes = "configurations built in memory, with closed forms where they exist",
      .claim = "each method's failure mode is where the theory puts it, and non-physical input is refused",
+     .own_units = 1,
      .run = rp_exp_stability},
     {.name = "realscenes",
      .summary = "published OBJ/MTL scenes and scanned meshes: every method against the path tracer per "

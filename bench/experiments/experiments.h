@@ -44,6 +44,10 @@ typedef struct rp_experiment_params {
     /* The experiment being run (set by whoever runs it): its declared
      * settings, see rp_experiment_setting_of. */
     const struct rp_experiment *experiment;
+    /* Set by rp_experiment_run under mpirun while it hands the units of an
+     * experiment's own tables out to ranks (exp_internal.h, rp_exp_unit);
+     * NULL otherwise. */
+    struct rp_exp_handout *handout;
 } rp_experiment_params;
 
 /* One size of an experiment (its --quick or its full form).  Zero / NULL
@@ -63,10 +67,25 @@ typedef struct rp_experiment {
     const char *claim;           /* the claim its report checks in numbers (and its test) */
     rp_experiment_setting quick, full;
     const char *budget_unit;     /* what budget counts, NULL: seconds per run */
+    /* 1: the experiment runs units of its own (rows of its tables, not
+     * harness runs) through rp_exp_unit, so that rp_experiment_run can hand
+     * them out to MPI ranks.  0: its runs are benches, which hand out their
+     * runs themselves (harness.h). */
+    int own_units;
     /* RP_ERR_UNSUPPORTED: the experiment cannot run here (e.g. its method
      * is not registered). */
     rp_status (*run)(const rp_experiment_params *p, rp_error *err);
 } rp_experiment;
+
+/* Runs p->experiment.  Under mpirun (more than one rank) an experiment
+ * with own_units runs twice: a hand-out pass, in which each rank computes
+ * the units it owns (unit k of those not yet in the journal goes to rank
+ * k mod K) with every file output discarded, then an exchange that puts
+ * every rank's new records into every rank's journal (rank 0 writes them
+ * to DIR/journal.txt), then the ordinary pass, which reads every unit back
+ * and writes the reports on rank 0.  Results equal a single process's,
+ * timings aside.  Otherwise it calls p->experiment->run. */
+rp_status rp_experiment_run(const rp_experiment_params *p, rp_error *err);
 
 /* NULL-terminated list, and look-up by name. */
 const rp_experiment *const *rp_experiments(void);

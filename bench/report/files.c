@@ -25,6 +25,23 @@ int rp_files_discarding(void)
     return discarding;
 }
 
+/* rp_files_discard_under's directory ("": none). */
+static char held[1024];
+
+void rp_files_discard_under(const char *dir)
+{
+    snprintf(held, sizeof held, "%s", dir ? dir : "");
+    size_t n = strlen(held);
+    while (n > 1 && held[n - 1] == '/')
+        held[--n] = '\0';
+}
+
+int rp_files_discarded(const char *path)
+{
+    size_t n = strlen(held);
+    return discarding || (n && strncmp(path, held, n) == 0 && (path[n] == '/' || path[n] == '\0'));
+}
+
 rp_status rp_mkdirs(const char *path, rp_error *err)
 {
     if (discarding)
@@ -65,7 +82,7 @@ const char *rp_path_join(char *buf, size_t n, const char *dir, const char *name)
 rp_status rp_temp_open(const char *path, int *fd_out, char **tmp_out, rp_error *err)
 {
     static atomic_uint counter;
-    if (discarding) {
+    if (rp_files_discarded(path)) {
         int fd = open("/dev/null", O_WRONLY | O_CLOEXEC);
         if (fd < 0)
             return rp_error_set(err, RP_ERR_RUNTIME, "/dev/null: %s", strerror(errno));

@@ -15,6 +15,13 @@ rp_status rp_mkdirs(const char *path, rp_error *err);
  * and rp_mkdirs makes nothing (MPI ranks other than 0, bench/run/mpi.h). */
 void rp_files_discard(int on);
 int rp_files_discarding(void);
+/* Also goes to /dev/null: every file written under dir (NULL: none), as
+ * in the hand-out pass of rp_experiment_run, which writes nothing into the
+ * study's directory while files elsewhere (the reference cache) are
+ * written as usual.  rp_files_discarded: 1 when a file written to path
+ * goes to /dev/null. */
+void rp_files_discard_under(const char *dir);
+int rp_files_discarded(const char *path);
 
 /* The one atomic file writer of radpt: a fresh PATH.tmp.PID.N (O_EXCL),
  * written, flushed to disk (fsync), closed and renamed over PATH; any

@@ -59,7 +59,7 @@ const char *rp_gnuplot_png_terminal(void)
 
 rp_status rp_gnuplot_run(const char *dir, const char *script, rp_error *err)
 {
-    if (rp_files_discarding()) /* not the rank that writes files (files.h) */
+    if (rp_files_discarded(dir)) /* not the rank that writes files, or not now (files.h) */
         return RP_OK;
     if (!rp_gnuplot_png_terminal())
         return rp_error_set(err, RP_ERR_UNSUPPORTED, "gnuplot is not installed (Debian: gnuplot-nox)");

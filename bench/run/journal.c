@@ -255,4 +255,10 @@ int rp_journal_get_doubles(const rp_journal *j, const char *key, double *v, size
 
 size_t rp_journal_count(const rp_journal *j) { return j ? j->n : 0; }
 size_t rp_journal_resumed(const rp_journal *j) { return j ? j->loaded : 0; }
+void rp_journal_record(const rp_journal *j, size_t i, const char **key, const char **payload)
+{
+    *key = j->rec[i].key;
+    *payload = j->rec[i].payload;
+}
+
 const char *rp_journal_path(const rp_journal *j) { return j ? j->path : ""; }

@@ -50,6 +50,10 @@ int rp_journal_get_doubles(const rp_journal *j, const char *key, double *v, size
 /* Units recorded so far (loaded and put), and those loaded by open. */
 size_t rp_journal_count(const rp_journal *j);
 size_t rp_journal_resumed(const rp_journal *j);
+/* Record i (0 <= i < rp_journal_count(j), in the order loaded and put):
+ * its key and payload, valid until the next put or close.  A key recorded
+ * twice appears twice (rp_journal_get gives the later). */
+void rp_journal_record(const rp_journal *j, size_t i, const char **key, const char **payload);
 /* DIR/journal.txt, for messages. */
 const char *rp_journal_path(const rp_journal *j);
 
