@@ -77,3 +77,43 @@ Test(journal, torn_record_is_dropped)
     cr_assert(strstr(err.message, "journal.txt"), "%s", err.message);
     rmdir(dir);
 }
+
+/* What a rank other than 0 recorded in its side journal before mpirun
+ * killed it is read back on resume after the journal; a side journal of
+ * another study is skipped; a study that ended removes them. */
+Test(journal, side_journals_of_ranks_are_read_back)
+{
+    char dir[64], path[128];
+    tmpdir(dir, sizeof dir);
+    rp_journal *j;
+    rp_error err;
+    cr_assert_eq(rp_journal_open(dir, "bench s", 0, &j, &err), RP_OK);
+    cr_assert_eq(rp_journal_put(j, "run 1", "1", &err), RP_OK);
+    rp_journal_close(j);
+    /* as ranks 1 and 2 write theirs (journal.h); rank 2's is another study */
+    static const char *side[2][2] = {{"journal.rank-1.txt", "radpt-journal 1\nidentity bench s\nrun 2\t2\nrun 3\t3\nrun 4\t4"},
+                                     {"journal.rank-2.txt", "radpt-journal 1\nidentity bench t\nrun 5\t5\n"}};
+    for (int r = 0; r < 2; r++) {
+        snprintf(path, sizeof path, "%s/%s", dir, side[r][0]);
+        FILE *f = fopen(path, "w");
+        cr_assert_not_null(f);
+        fputs(side[r][1], f); /* rank 1's last record cut short by the kill */
+        fclose(f);
+    }
+    cr_assert_eq(rp_journal_open(dir, "bench s", 1, &j, &err), RP_OK, "%s", err.message);
+    cr_expect_eq(rp_journal_resumed(j), 3);
+    cr_expect_str_eq(rp_journal_get(j, "run 3"), "3");
+    cr_expect_null(rp_journal_get(j, "run 4"));
+    cr_expect_null(rp_journal_get(j, "run 5"));
+    rp_journal_tidy(j);
+    rp_journal_close(j);
+    snprintf(path, sizeof path, "%s/journal.rank-1.txt", dir);
+    cr_expect_eq(access(path, F_OK), -1, "tidy leaves %s", path);
+    /* journal.txt now holds rank 1's records itself */
+    cr_assert_eq(rp_journal_open(dir, "bench s", 1, &j, &err), RP_OK, "%s", err.message);
+    cr_expect_eq(rp_journal_resumed(j), 3);
+    rp_journal_close(j);
+    char cmd[160];
+    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+    cr_expect_eq(system(cmd), 0);
+}

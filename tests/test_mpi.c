@@ -337,6 +337,9 @@ Test(mpi, experiment_units_are_handed_out_to_ranks)
         cr_assert_not_null(j);
         cr_expect_eq(rp_count_lines(j), 2 + 36, "K=%d", k);
         free(j);
+        /* the ranks' side journals went once the study ended */
+        snprintf(path, sizeof path, "%s/journal.rank-1.txt", other);
+        cr_expect_eq(access(path, F_OK), -1, "K=%d: %s left", k, path);
     }
 }
 

@@ -541,6 +541,8 @@ int rp_cmd_bench(int argc, char **argv)
         resume_hint(argc, argv, dir, hint, sizeof hint);
         rp_error_set(&err, RP_ERR_INTERRUPTED, "interrupted before any run finished; continue with: %s", hint);
     }
+    if (st == RP_OK)
+        rp_journal_tidy(journal); /* every record is in journal.txt */
     rp_journal_close(journal);
     rp_bench_destroy(bench);
     rp_reference_destroy(ref);
@@ -618,6 +620,8 @@ int rp_cmd_experiment(int argc, char **argv)
     if (st == RP_OK)
         st = rp_experiment_run(&p, &err);
     front_done(&fr);
+    if (st == RP_OK)
+        rp_journal_tidy(journal); /* every record is in journal.txt */
     rp_journal_close(journal);
     if (st == RP_OK)
         printf("report: %s/report.md\n", dir);

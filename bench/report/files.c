@@ -25,6 +25,14 @@ int rp_files_discarding(void)
     return discarding;
 }
 
+/* rp_files_own: this rank writes its own files for now. */
+static int own;
+
+void rp_files_own(int on)
+{
+    own = on;
+}
+
 /* rp_files_discard_under's directory ("": none). */
 static char held[1024];
 
@@ -39,12 +47,12 @@ void rp_files_discard_under(const char *dir)
 int rp_files_discarded(const char *path)
 {
     size_t n = strlen(held);
-    return discarding || (n && strncmp(path, held, n) == 0 && (path[n] == '/' || path[n] == '\0'));
+    return (discarding && !own) || (n && strncmp(path, held, n) == 0 && (path[n] == '/' || path[n] == '\0'));
 }
 
 rp_status rp_mkdirs(const char *path, rp_error *err)
 {
-    if (discarding)
+    if (discarding && !own)
         return RP_OK;
     char buf[1024];
     size_t n = strlen(path);

@@ -21,6 +21,9 @@ int rp_files_discarding(void);
  * written as usual.  rp_files_discarded: 1 when a file written to path
  * goes to /dev/null. */
 void rp_files_discard_under(const char *dir);
+/* on: files are written even on a discarding rank (rp_files_discard), for
+ * the records a rank keeps of its own work (journal.h) until it is off. */
+void rp_files_own(int on);
 int rp_files_discarded(const char *path);
 
 /* The one atomic file writer of radpt: a fresh PATH.tmp.PID.N (O_EXCL),

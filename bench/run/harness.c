@@ -844,8 +844,14 @@ static rp_status bench_spread(rp_bench *b, const rp_comm *comm, bench_slot *slot
         if (hst == RP_OK && done[k].status == RP_ERR_INTERRUPTED) {
             rp_trial_free(&done[k]);
             interrupted = 1;
-        } else if (hst == RP_OK)
+        } else if (hst == RP_OK) {
             state[k] = 2; /* finished here */
+            /* recorded at once by the rank that ran it (its image too):
+             * mpirun may kill the ranks before the hand-back below */
+            rp_files_own(1);
+            hst = trial_put(b, slots[k].key, &done[k], &herr);
+            rp_files_own(0);
+        }
     }
 
     /* every run's record to every rank, in the study's order */
@@ -870,8 +876,8 @@ static rp_status bench_spread(rp_bench *b, const rp_comm *comm, bench_slot *slot
             bench_log(b, "run %zu of %zu: %s seed %llu: recorded, read back from %s", k + 1, nslots,
                       b->methods[run->method].text, (unsigned long long)run->seed,
                       rp_journal_path(b->params.journal));
-        } else if ((st = trial_put(b, slots[k].key, run, err)) != RP_OK)
-            break;
+        } else if (!mine && (st = trial_put(b, slots[k].key, run, err)) != RP_OK)
+            break; /* the holder recorded it when it finished */
         b->nruns++;
         if (run->status != RP_OK)
             b->failures++;

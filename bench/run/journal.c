@@ -1,15 +1,18 @@
 /* A study's journal (journal.h). */
 #include "bench/run/journal.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "bench/report/files.h"
+#include "bench/run/mpi.h"
 
 #define JOURNAL_MAGIC "radpt-journal 1"
 
@@ -19,7 +22,9 @@ typedef struct record {
 } record;
 
 struct rp_journal {
+    char dir[1024];
     char path[1100];
+    char wpath[1100]; /* where this process appends: path, or its rank's side journal */
     int fd;
     record *rec;
     size_t n, cap, loaded;
@@ -57,13 +62,14 @@ static rp_status add(rp_journal *j, const char *key, size_t klen, const char *pa
     return RP_OK;
 }
 
-/* Reads an existing journal: its identity must match; whole records load. */
-static rp_status load(rp_journal *j, const char *identity, rp_error *err)
+/* Reads an existing journal file: its identity must match; whole records
+ * load. */
+static rp_status load_file(rp_journal *j, const char *path, const char *identity, rp_error *err)
 {
-    FILE *f = fopen(j->path, "r");
+    FILE *f = fopen(path, "r");
     if (!f)
         return rp_error_set(err, RP_ERR_INPUT, "%s: cannot resume: %s (was the study started with -o on this "
-                                               "directory?)", j->path, strerror(errno));
+                                               "directory?)", path, strerror(errno));
     char *line = NULL;
     size_t cap = 0;
     ssize_t len;
@@ -76,30 +82,71 @@ static rp_status load(rp_journal *j, const char *identity, rp_error *err)
         line[--len] = '\0';
         if (lineno == 1) {
             if (strcmp(line, JOURNAL_MAGIC) != 0)
-                st = rp_error_set(err, RP_ERR_INPUT, "%s:1: not a radpt journal", j->path);
+                st = rp_error_set(err, RP_ERR_INPUT, "%s:1: not a radpt journal", path);
             continue;
         }
         if (lineno == 2) {
             if (strncmp(line, "identity ", 9) != 0)
-                st = rp_error_set(err, RP_ERR_INPUT, "%s:2: no identity line", j->path);
+                st = rp_error_set(err, RP_ERR_INPUT, "%s:2: no identity line", path);
             else if (strcmp(line + 9, identity) != 0)
                 st = rp_error_set(err, RP_ERR_INPUT,
                                   "%s: cannot resume: the study there is '%s', this one is '%s' (same command, "
                                   "options and scenes needed; or start afresh with -o)",
-                                  j->path, line + 9, identity);
+                                  path, line + 9, identity);
             continue;
         }
         char *tab = strchr(line, '\t');
         if (!tab) {
-            st = rp_error_set(err, RP_ERR_INPUT, "%s:%zu: malformed record (no tab)", j->path, lineno);
+            st = rp_error_set(err, RP_ERR_INPUT, "%s:%zu: malformed record (no tab)", path, lineno);
             break;
         }
         st = add(j, line, (size_t)(tab - line), tab + 1, strlen(tab + 1), err);
     }
     if (st == RP_OK && lineno < 2)
-        st = rp_error_set(err, RP_ERR_INPUT, "%s: cannot resume: the journal has no head", j->path);
+        st = rp_error_set(err, RP_ERR_INPUT, "%s: cannot resume: the journal has no head", path);
     free(line);
     fclose(f);
+    return st;
+}
+
+/* DIR/journal.rank-R.txt: where MPI rank R > 0 records the units it
+ * finishes, the moment it finishes them (mpirun kills ranks a second after
+ * Ctrl-C, before they could hand their records to rank 0). */
+static const char *side_path(const rp_journal *j, int rank, char *buf, size_t n)
+{
+    char name[64];
+    snprintf(name, sizeof name, "journal.rank-%d.txt", rank);
+    return rp_path_join(buf, n, j->dir, name);
+}
+
+static int is_side_name(const char *name)
+{
+    int rank, end = 0;
+    return sscanf(name, "journal.rank-%d.txt%n", &rank, &end) == 1 && end > 0 && name[end] == '\0' && rank > 0;
+}
+
+/* The journal and, after it, every rank's side journal of the same study
+ * (one of another study, left in the directory, is skipped). */
+static rp_status load(rp_journal *j, const char *identity, rp_error *err)
+{
+    rp_status st = load_file(j, j->path, identity, err);
+    DIR *d = st == RP_OK ? opendir(j->dir) : NULL;
+    for (struct dirent *e; d && st == RP_OK && (e = readdir(d));) {
+        if (!is_side_name(e->d_name))
+            continue;
+        char path[1100];
+        rp_error serr;
+        size_t n = j->n;
+        if (load_file(j, rp_path_join(path, sizeof path, j->dir, e->d_name), identity, &serr) != RP_OK) {
+            while (j->n > n) { /* not this study's: none of its records */
+                j->n--;
+                free(j->rec[j->n].key);
+                free(j->rec[j->n].payload);
+            }
+        }
+    }
+    if (d)
+        closedir(d);
     j->loaded = j->n;
     return st;
 }
@@ -111,13 +158,25 @@ static rp_status write_all(rp_journal *j, const char *buf, size_t n, rp_error *e
         if (w < 0 && errno == EINTR)
             continue;
         if (w <= 0)
-            return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot write: %s", j->path, strerror(errno));
+            return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot write: %s", j->wpath, strerror(errno));
         buf += w;
         n -= (size_t)w;
     }
     if (fsync(j->fd) != 0 && errno != EINVAL)
-        return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot sync: %s", j->path, strerror(errno));
+        return rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot sync: %s", j->wpath, strerror(errno));
     return RP_OK;
+}
+
+static rp_status write_head(rp_journal *j, const char *identity, rp_error *err)
+{
+    size_t n = strlen(JOURNAL_MAGIC) + strlen(identity) + 16;
+    char *head = malloc(n);
+    if (!head)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    snprintf(head, n, "%s\nidentity %s\n", JOURNAL_MAGIC, identity);
+    rp_status st = write_all(j, head, strlen(head), err);
+    free(head);
+    return st;
 }
 
 rp_status rp_journal_open(const char *dir, const char *identity, int resume, rp_journal **out, rp_error *err)
@@ -129,11 +188,35 @@ rp_status rp_journal_open(const char *dir, const char *identity, int resume, rp_
     if (!j)
         return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
     j->fd = -1;
+    snprintf(j->dir, sizeof j->dir, "%s", dir);
     rp_path_join(j->path, sizeof j->path, dir, "journal.txt");
     rp_status st = RP_OK;
-    /* MPI ranks other than 0 read the journal but never write it */
-    const char *wpath = rp_files_discarding() ? "/dev/null" : j->path;
-    if (resume) {
+    /* MPI ranks other than 0 read the journal but append to their own side
+     * journal, which every rank reads back on --resume */
+    int rank = rp_mpi_rank();
+    if (rank > 0)
+        side_path(j, rank, j->wpath, sizeof j->wpath);
+    else
+        snprintf(j->wpath, sizeof j->wpath, "%s", j->path);
+    const char *wpath = j->wpath;
+    /* the directory may not be there yet when rank 0 makes it */
+    rp_files_own(1);
+    st = rank > 0 ? rp_mkdirs(dir, err) : RP_OK;
+    rp_files_own(0);
+    if (st != RP_OK) {
+        rp_journal_close(j);
+        return st;
+    }
+    if (resume && rank > 0) {
+        st = load(j, identity, err);
+        /* this rank's side journal goes on after what it holds */
+        struct stat sb;
+        int fresh = stat(wpath, &sb) != 0 || sb.st_size == 0;
+        if (st == RP_OK && (j->fd = open(wpath, O_WRONLY | O_CREAT | O_APPEND, 0666)) < 0)
+            st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot open: %s", wpath, strerror(errno));
+        if (st == RP_OK && fresh)
+            st = write_head(j, identity, err);
+    } else if (resume) {
         st = load(j, identity, err);
         if (st == RP_OK) {
             /* a torn last record is dropped from the file by rewriting the
@@ -153,18 +236,9 @@ rp_status rp_journal_open(const char *dir, const char *identity, int resume, rp_
     } else {
         j->fd = open(wpath, O_WRONLY | O_CREAT | O_TRUNC, 0666);
         if (j->fd < 0)
-            st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot create: %s", j->path, strerror(errno));
-        if (st == RP_OK) {
-            size_t n = strlen(JOURNAL_MAGIC) + strlen(identity) + 16;
-            char *head = malloc(n);
-            if (!head)
-                st = rp_error_set(err, RP_ERR_NOMEM, "out of memory");
-            else {
-                snprintf(head, n, "%s\nidentity %s\n", JOURNAL_MAGIC, identity);
-                st = write_all(j, head, strlen(head), err);
-                free(head);
-            }
-        }
+            st = rp_error_set(err, RP_ERR_RUNTIME, "%s: cannot create: %s", wpath, strerror(errno));
+        if (st == RP_OK)
+            st = write_head(j, identity, err);
     }
     if (st != RP_OK) {
         rp_journal_close(j);
@@ -255,6 +329,20 @@ int rp_journal_get_doubles(const rp_journal *j, const char *key, double *v, size
 
 size_t rp_journal_count(const rp_journal *j) { return j ? j->n : 0; }
 size_t rp_journal_resumed(const rp_journal *j) { return j ? j->loaded : 0; }
+void rp_journal_tidy(rp_journal *j)
+{
+    if (!j || rp_mpi_rank() > 0)
+        return;
+    DIR *d = opendir(j->dir);
+    for (struct dirent *e; d && (e = readdir(d));) {
+        char path[1100];
+        if (is_side_name(e->d_name))
+            unlink(rp_path_join(path, sizeof path, j->dir, e->d_name));
+    }
+    if (d)
+        closedir(d);
+}
+
 void rp_journal_record(const rp_journal *j, size_t i, const char **key, const char **payload)
 {
     *key = j->rec[i].key;

@@ -27,7 +27,13 @@
 
 typedef struct rp_journal rp_journal;
 
-/* Opens DIR/journal.txt (DIR must exist).  resume 0: a new journal (one
+/* Under mpirun, rank 0 appends to DIR/journal.txt and every other rank R
+ * to its side journal DIR/journal.rank-R.txt (same format), each the
+ * moment a unit finishes there: mpirun kills the ranks a second after
+ * Ctrl-C, which may be before they hand their records to rank 0.  A resume
+ * reads the side journals after the journal.
+ *
+ * Opens DIR/journal.txt (DIR must exist).  resume 0: a new journal (one
  * already there is replaced).  resume 1: the journal must exist and name
  * the same identity (RP_ERR_INPUT naming the file and both identities
  * otherwise); its records are loaded.  identity must be one line. */
@@ -50,6 +56,9 @@ int rp_journal_get_doubles(const rp_journal *j, const char *key, double *v, size
 /* Units recorded so far (loaded and put), and those loaded by open. */
 size_t rp_journal_count(const rp_journal *j);
 size_t rp_journal_resumed(const rp_journal *j);
+/* After a study that ended normally (every record reached rank 0's
+ * journal): removes the side journals (rank 0 or a plain process). */
+void rp_journal_tidy(rp_journal *j);
 /* Record i (0 <= i < rp_journal_count(j), in the order loaded and put):
  * its key and payload, valid until the next put or close.  A key recorded
  * twice appears twice (rp_journal_get gives the later). */
