@@ -157,6 +157,29 @@ static long plane_index(const rp_image *img, const char *name)
     return -1;
 }
 
+/* OpenEXRCore 3.1's ZIP, ZIPS and PXR24 encoders keep a compressed chunk
+ * exactly as large as the raw data, which readers (OpenEXRCore and the C++
+ * library alike) then take for raw data: in the file layout a chunk whose
+ * stored size equals its raw size is uncompressed.  A 5 x 1 float image
+ * 0, 0.25, 0, 0.25, 0 read back as zlib bytes.  Upstream fixed ZIP later
+ * (openexr PR #2307, "compbufsz >= packed_bytes").  This wraps the chosen
+ * compressor and stores such a chunk raw, as the library does with one
+ * that grew. */
+typedef struct exr_compress_guard {
+    exr_result_t (*compress)(exr_encode_pipeline_t *enc);
+} exr_compress_guard;
+
+static exr_result_t exr_compress_guarded(exr_encode_pipeline_t *enc)
+{
+    const exr_compress_guard *g = enc->encoding_user_data;
+    exr_result_t rv = g->compress(enc);
+    if (rv == EXR_ERR_SUCCESS && enc->compressed_bytes >= enc->packed_bytes) {
+        memcpy(enc->compressed_buffer, enc->packed_buffer, (size_t)enc->packed_bytes);
+        enc->compressed_bytes = (size_t)enc->packed_bytes;
+    }
+    return rv;
+}
+
 /* Header and pixels of one scanline part.  Returns the failing call's
  * result, with *what naming the step. */
 static exr_result_t exr_write_image(exr_context_t ctx, const rp_image *img, int longnames,
@@ -202,6 +225,7 @@ static exr_result_t exr_write_image(exr_context_t ctx, const rp_image *img, int 
 
     exr_encode_pipeline_t enc;
     memset(&enc, 0, sizeof enc);
+    exr_compress_guard guard = {NULL};
     int initialised = 0;
     int32_t line_stride = (int32_t)(img->width * sizeof(float));
     for (int32_t y = 0; y < (int32_t)img->height; y += lines_per_chunk) {
@@ -238,6 +262,11 @@ static exr_result_t exr_write_image(exr_context_t ctx, const rp_image *img, int 
             if ((rv = exr_encoding_choose_default_routines(ctx, part, &enc)) != EXR_ERR_SUCCESS)
                 break;
             initialised = 1;
+            if (enc.compress_fn) {
+                guard.compress = enc.compress_fn;
+                enc.encoding_user_data = &guard;
+                enc.compress_fn = exr_compress_guarded;
+            }
         }
         *what = "encode chunk";
         if ((rv = exr_encoding_run(ctx, part, &enc)) != EXR_ERR_SUCCESS)
