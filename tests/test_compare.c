@@ -7,6 +7,8 @@
 #include <string.h>
 #include <unistd.h>
 
+#include <OpenEXR/openexr.h>
+
 #include "bench/report/image.h"
 #include "bench/run/metrics.h"
 #include "bench/run/reference.h"
@@ -115,4 +117,346 @@ Test(compare, other_renderers_channel_names)
     unlink("/tmp/rp-compare-blender.exr");
     unlink("/tmp/rp-compare-plain.exr");
     unlink("/tmp/rp-compare-y.exr");
+}
+
+/* ---------------------------------------------------------------------
+ * Tiled EXRs (OpenEXR file layout, "Tiles"): written here with
+ * OpenEXRCore, tile by tile, and read by radpt as the same pixels written
+ * as scanlines. */
+
+/* An image as OpenEXRCore writes it: storage, tiling, compression, data
+ * window origin, channels with their stored types.  Values are given as
+ * float; half channels get values a half holds exactly (the encoder
+ * converts), so what radpt reads back is what the test wrote. */
+typedef struct core_exr {
+    exr_storage_t storage;
+    exr_tile_level_mode_t levels;
+    exr_tile_round_mode_t round;
+    uint32_t tile_w, tile_h;
+    exr_compression_t compression;
+    int32_t x0, y0;
+    int32_t w, h;
+    int n;
+    const char *const *names;
+    const exr_pixel_type_t *types;
+    const float *const *planes;
+} core_exr;
+
+static void exr_ok(exr_result_t rv, const char *call)
+{
+    cr_assert_eq(rv, EXR_ERR_SUCCESS, "%s: %s", call, exr_get_default_error_message(rv));
+}
+#define EXR_OK(call) exr_ok((call), #call)
+
+/* OpenEXRCore 3.1's ZIP and PXR24 encoders keep a compressed chunk as
+ * large as the raw data, which readers take for raw data (a 2 x 7 edge
+ * tile of this test's ZIPS file did): stored raw instead, as
+ * rp_image_write_exr does (bench/report/image.c, exr_compress_guarded). */
+static exr_result_t (*core_default_compress)(exr_encode_pipeline_t *);
+
+static exr_result_t core_compress(exr_encode_pipeline_t *enc)
+{
+    exr_result_t rv = core_default_compress(enc);
+    if (rv == EXR_ERR_SUCCESS && enc->compressed_bytes >= enc->packed_bytes) {
+        memcpy(enc->compressed_buffer, enc->packed_buffer, enc->packed_bytes);
+        enc->compressed_bytes = enc->packed_bytes;
+    }
+    return rv;
+}
+
+/* One chunk through the encoder: channel planes[k] (k by name) from pixel
+ * (x, y), rows stride floats apart; pixels of levels other than (0, 0)
+ * (filler != NULL) all hold *filler. */
+static void core_encode(exr_context_t ctx, const core_exr *s, exr_chunk_info_t *ci, exr_encode_pipeline_t *enc,
+                        int *first, size_t x, size_t y, size_t stride, const float *filler)
+{
+    EXR_OK(*first ? exr_encoding_initialize(ctx, 0, ci, enc) : exr_encoding_update(ctx, 0, ci, enc));
+    for (int16_t c = 0; c < enc->channel_count; c++) {
+        exr_coding_channel_info_t *ch = &enc->channels[c];
+        int k = -1;
+        for (int j = 0; j < s->n; j++)
+            if (!strcmp(s->names[j], ch->channel_name))
+                k = j;
+        cr_assert(k >= 0, "channel %s", ch->channel_name);
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+        ch->user_bytes_per_element = sizeof(float);
+        ch->user_pixel_stride = sizeof(float);
+        ch->user_line_stride = (int32_t)(stride * sizeof(float));
+        ch->encode_from_ptr = (const uint8_t *)(filler ? filler : s->planes[k] + y * stride + x);
+    }
+    if (*first) {
+        EXR_OK(exr_encoding_choose_default_routines(ctx, 0, enc));
+        if (enc->compress_fn) {
+            core_default_compress = enc->compress_fn;
+            enc->compress_fn = core_compress;
+        }
+    }
+    *first = 0;
+    EXR_OK(exr_encoding_run(ctx, 0, enc));
+}
+
+static void core_write(const char *path, const core_exr *s)
+{
+    exr_context_t ctx = NULL;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    EXR_OK(exr_start_write(&ctx, path, EXR_WRITE_FILE_DIRECTLY, &init));
+    int part;
+    EXR_OK(exr_add_part(ctx, NULL, s->storage, &part));
+    exr_attr_box2i_t dw;
+    dw.min.x = s->x0;
+    dw.min.y = s->y0;
+    dw.max.x = s->x0 + s->w - 1;
+    dw.max.y = s->y0 + s->h - 1;
+    exr_attr_v2f_t centre;
+    centre.x = centre.y = 0;
+    EXR_OK(exr_initialize_required_attr(ctx, part, &dw, &dw, 1, &centre, 1, EXR_LINEORDER_INCREASING_Y,
+                                        s->compression));
+    for (int c = 0; c < s->n; c++)
+        EXR_OK(exr_add_channel(ctx, part, s->names[c], s->types[c], EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1));
+    if (s->storage == EXR_STORAGE_TILED)
+        EXR_OK(exr_set_tile_descriptor(ctx, part, s->tile_w, s->tile_h, s->levels, s->round));
+    EXR_OK(exr_write_header(ctx));
+
+    exr_encode_pipeline_t enc;
+    memset(&enc, 0, sizeof enc);
+    exr_chunk_info_t ci;
+    int first = 1;
+    if (s->storage == EXR_STORAGE_SCANLINE) {
+        int32_t lines;
+        EXR_OK(exr_get_scanlines_per_chunk(ctx, part, &lines));
+        for (int32_t y = s->y0; y < s->y0 + s->h; y += lines) {
+            EXR_OK(exr_write_scanline_chunk_info(ctx, part, y, &ci));
+            core_encode(ctx, s, &ci, &enc, &first, 0, (size_t)(ci.start_y - s->y0), (size_t)s->w, NULL);
+        }
+    } else {
+        /* One level or mipmap levels (l, l).  Not ripmaps: OpenEXRCore 3.1
+         * numbers the chunks of rip level (lx, ly > 0) wrongly (it adds
+         * the levels (< lx, < ly) before it, not every x level of the rows
+         * above; fixed upstream later), and refuses to write them. */
+        cr_assert(s->levels != EXR_TILE_RIPMAP_LEVELS);
+        int32_t nlx, nly;
+        EXR_OK(exr_get_tile_levels(ctx, part, &nlx, &nly));
+        float *filler = malloc((size_t)s->w * (size_t)s->h * sizeof *filler);
+        cr_assert_not_null(filler);
+        for (size_t i = 0; i < (size_t)s->w * (size_t)s->h; i++)
+            filler[i] = 64; /* any other level must not be what is read */
+        for (int32_t l = 0; l < nlx && l < nly; l++) {
+            int32_t lx = l, ly = l, lw, lh, tw, th;
+            EXR_OK(exr_get_level_sizes(ctx, part, lx, ly, &lw, &lh));
+            EXR_OK(exr_get_tile_sizes(ctx, part, lx, ly, &tw, &th));
+            for (int32_t ty = 0; ty * th < lh; ty++)
+                for (int32_t tx = 0; tx * tw < lw; tx++) {
+                    EXR_OK(exr_write_tile_chunk_info(ctx, part, tx, ty, lx, ly, &ci));
+                    core_encode(ctx, s, &ci, &enc, &first, (size_t)(tx * tw), (size_t)(ty * th),
+                                lx || ly ? (size_t)lw : (size_t)s->w, lx || ly ? filler : NULL);
+                }
+        }
+        free(filler);
+    }
+    EXR_OK(exr_encoding_destroy(ctx, &enc));
+    EXR_OK(exr_finish(&ctx));
+}
+
+enum { TW = 37, TH = 23 };
+
+/* Channel c of pixel i: k / 64 for an integer k in [0, 255], which a half
+ * holds exactly (11 significant bits), as it does 1.5 times that. */
+static float tiled_value(int c, int i)
+{
+    return (float)((i * 7 + c * 53 + (i / TW) * 11) % 256) / 64.0f;
+}
+
+/* radpt reads what was written, value for value. */
+static void expect_pixels(const char *path, const core_exr *s)
+{
+    uint32_t w, h;
+    size_t n;
+    char **names;
+    float **planes;
+    rp_error err;
+    cr_assert_eq(rp_image_read_exr(path, &w, &h, &n, &names, &planes, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(w, (uint32_t)s->w);
+    cr_assert_eq(h, (uint32_t)s->h);
+    cr_assert_eq(n, (size_t)s->n);
+    for (size_t c = 0; c < n; c++) {
+        int k = -1;
+        for (int j = 0; j < s->n; j++)
+            if (!strcmp(s->names[j], names[c]))
+                k = j;
+        cr_assert(k >= 0, "%s: channel %s", path, names[c]);
+        size_t bad = 0, first = 0;
+        for (size_t i = 0; i < (size_t)s->w * (size_t)s->h; i++)
+            if (planes[c][i] != s->planes[k][i] && !bad++)
+                first = i;
+        cr_expect_eq(bad, 0, "%s: channel %s: %zu pixels differ, the first (%zu, %zu): %g, wrote %g", path,
+                     names[c], bad, first % (size_t)s->w, first / (size_t)s->w, planes[c][first],
+                     s->planes[k][first]);
+        free(names[c]);
+        free(planes[c]);
+    }
+    free(names);
+    free(planes);
+}
+
+/* A 37 x 23 image (data window from (-3, 5)) with half and float channels,
+ * tiled 16 x 16 (tiles cut at the right and bottom edges), 5 x 7 and
+ * 64 x 64 (one tile larger than the image), in every lossless compression
+ * and PXR24 (lossless on these values: 8 significant bits): radpt reads the
+ * values written, as it does the same image in scanlines, and radpt
+ * compare gives 0 between the two. */
+Test(compare, tiled_reads_as_scanline)
+{
+    static const char *const names[4] = {"A", "B", "G", "R"};
+    static const exr_pixel_type_t types[4] = {EXR_PIXEL_FLOAT, EXR_PIXEL_HALF, EXR_PIXEL_FLOAT, EXR_PIXEL_HALF};
+    static float v[4][TW * TH];
+    for (int c = 0; c < 4; c++)
+        for (int i = 0; i < TW * TH; i++)
+            v[c][i] = tiled_value(c, i);
+    const float *planes[4] = {v[0], v[1], v[2], v[3]};
+    char dir[64], scan[96], tiled[96], args[300];
+    cr_assert_eq(rp_test_tmpdir(dir, sizeof dir, "rp-compare-tiled"), 0);
+    snprintf(scan, sizeof scan, "%s/scan.exr", dir);
+    snprintf(tiled, sizeof tiled, "%s/tiled.exr", dir);
+    static const exr_compression_t comps[] = {EXR_COMPRESSION_NONE, EXR_COMPRESSION_RLE, EXR_COMPRESSION_ZIPS,
+                                              EXR_COMPRESSION_ZIP, EXR_COMPRESSION_PIZ, EXR_COMPRESSION_PXR24};
+    static const uint32_t tiles[3][2] = {{16, 16}, {5, 7}, {64, 64}};
+    for (size_t k = 0; k < sizeof comps / sizeof comps[0]; k++)
+        for (size_t t = 0; t < 3; t++) {
+            core_exr s = {.storage = EXR_STORAGE_SCANLINE, .compression = comps[k], .x0 = -3, .y0 = 5, .w = TW,
+                          .h = TH, .n = 4, .names = names, .types = types, .planes = planes};
+            core_write(scan, &s);
+            expect_pixels(scan, &s);
+            s.storage = EXR_STORAGE_TILED;
+            s.levels = EXR_TILE_ONE_LEVEL;
+            s.round = EXR_TILE_ROUND_DOWN;
+            s.tile_w = tiles[t][0];
+            s.tile_h = tiles[t][1];
+            core_write(tiled, &s);
+            expect_pixels(tiled, &s);
+            snprintf(args, sizeof args, "compare %s %s --json", tiled, scan);
+            rp_run r = rp_run_radpt(args);
+            cr_assert_eq(r.status, 0, "compression %d, tiles %u x %u: %s", (int)comps[k], s.tile_w, s.tile_h,
+                         r.err);
+            cr_expect_eq(rp_json_number_after(r.out, "{", "rmse"), 0.0, "%s", r.out);
+            cr_expect_eq(rp_json_number_after(r.out, "{", "max_abs_diff"), 0.0, "%s", r.out);
+            cr_expect_eq(rp_json_number_after(r.out, "{", "pixels_compared"), (double)(TW * TH), "%s", r.out);
+            rp_run_free(&r);
+        }
+    cr_expect_eq(rp_test_rmtree(dir), 0);
+}
+
+/* Blender's naming (ViewLayer.Combined.R, G, B, A) on a tiled image with
+ * half and float channels, against the same values times 1.5 in plain R,
+ * G, B scanlines: every metric is computed here from the values written
+ * (A - B = -0.5 v over the 3 x 37 x 23 values of R, G, B; alpha ignored). */
+Test(compare, tiled_known_rmse_blender_names)
+{
+    static const char *const blender[4] = {"ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B",
+                                           "ViewLayer.Combined.A"};
+    static const char *const plain[3] = {"R", "G", "B"};
+    static const exr_pixel_type_t types[4] = {EXR_PIXEL_HALF, EXR_PIXEL_FLOAT, EXR_PIXEL_HALF, EXR_PIXEL_FLOAT};
+    static float v[4][TW * TH], v15[3][TW * TH];
+    double sq = 0, abs_sum = 0, rel = 0, maxd = 0, sum_a[3] = {0}, sum_b[3] = {0};
+    for (int c = 0; c < 4; c++)
+        for (int i = 0; i < TW * TH; i++) {
+            v[c][i] = tiled_value(c, i);
+            if (c == 3)
+                continue;
+            v15[c][i] = 1.5f * v[c][i]; /* exact: k / 64 * 1.5 = 3k / 128 */
+            double x = v[c][i], r = v15[c][i], d = x - r;
+            sq += d * d;
+            abs_sum += fabs(d);
+            rel += d * d / (r * r + RP_RELMSE_EPS);
+            maxd = fmax(maxd, fabs(d));
+            sum_a[c] += x;
+            sum_b[c] += r;
+        }
+    const double k = 3.0 * TW * TH;
+    const float *pa[4] = {v[0], v[1], v[2], v[3]}, *pb[3] = {v15[0], v15[1], v15[2]};
+    char dir[64], a[96], b[96], args[300];
+    cr_assert_eq(rp_test_tmpdir(dir, sizeof dir, "rp-compare-blender"), 0);
+    snprintf(a, sizeof a, "%s/blender-tiled.exr", dir);
+    snprintf(b, sizeof b, "%s/plain-scan.exr", dir);
+    core_exr sa = {.storage = EXR_STORAGE_TILED, .levels = EXR_TILE_ONE_LEVEL, .tile_w = 16, .tile_h = 16,
+                   .compression = EXR_COMPRESSION_ZIP, .w = TW, .h = TH, .n = 4, .names = blender, .types = types,
+                   .planes = pa};
+    core_exr sb = {.storage = EXR_STORAGE_SCANLINE, .compression = EXR_COMPRESSION_PIZ, .w = TW, .h = TH, .n = 3,
+                   .names = plain, .types = types, .planes = pb};
+    core_write(a, &sa);
+    core_write(b, &sb);
+    snprintf(args, sizeof args, "compare %s %s --json", a, b);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect(strstr(r.out, "\"channels\": \"R,G,B\""), "%s", r.out);
+    cr_expect_eq(rp_json_number_after(r.out, "{", "pixels_compared"), (double)(TW * TH), "%s", r.out);
+    const double want[4] = {sqrt(sq / k), rel / k, abs_sum / k, maxd};
+    const char *key[4] = {"rmse", "relmse", "mae", "max_abs_diff"};
+    for (int m = 0; m < 4; m++) {
+        double got = rp_json_number_after(r.out, "{", key[m]);
+        /* printed with 9 significant digits; float inputs, double sums */
+        cr_expect(fabs(got - want[m]) <= 1e-7 * want[m], "%s: radpt %.9g, expected %.9g", key[m], got, want[m]);
+    }
+    const char *anchor[3] = {"\"channel\": \"R\", \"a\"", "\"channel\": \"G\", \"a\"", "\"channel\": \"B\", \"a\""};
+    for (int c = 0; c < 3; c++) {
+        double got = rp_json_number_after(r.out, anchor[c], "ratio");
+        cr_expect(fabs(got - sum_a[c] / sum_b[c]) <= 1e-7, "%s ratio %.9g", plain[c], got);
+    }
+    rp_run_free(&r);
+    cr_expect_eq(rp_test_rmtree(dir), 0);
+}
+
+/* Mipmapped files, levels rounded down and up: radpt reads level 0, the
+ * full image; every other level holds 64 everywhere, so reading one would
+ * show.  Tiled files made by the C++ library (exrmaketiled, Debian's
+ * openexr) from the scanline image, one level, mipmapped and ripmapped
+ * (which OpenEXRCore 3.1 cannot write), read the same. */
+Test(compare, tiled_levels_read_level_0)
+{
+    static const char *const names[3] = {"B", "G", "R"};
+    static const exr_pixel_type_t types[3] = {EXR_PIXEL_HALF, EXR_PIXEL_FLOAT, EXR_PIXEL_HALF};
+    static float v[3][TW * TH];
+    for (int c = 0; c < 3; c++)
+        for (int i = 0; i < TW * TH; i++)
+            v[c][i] = tiled_value(c, i);
+    const float *planes[3] = {v[0], v[1], v[2]};
+    char dir[64], scan[96], tiled[96], args[400];
+    cr_assert_eq(rp_test_tmpdir(dir, sizeof dir, "rp-compare-levels"), 0);
+    snprintf(scan, sizeof scan, "%s/scan.exr", dir);
+    snprintf(tiled, sizeof tiled, "%s/tiled.exr", dir);
+    core_exr s = {.storage = EXR_STORAGE_SCANLINE, .compression = EXR_COMPRESSION_ZIP, .x0 = 2, .y0 = -4, .w = TW,
+                  .h = TH, .n = 3, .names = names, .types = types, .planes = planes};
+    core_write(scan, &s);
+    static const exr_tile_round_mode_t rounds[2] = {EXR_TILE_ROUND_DOWN, EXR_TILE_ROUND_UP};
+    for (int rd = 0; rd < 2; rd++) {
+        core_exr t = s;
+        t.storage = EXR_STORAGE_TILED;
+        t.levels = EXR_TILE_MIPMAP_LEVELS;
+        t.round = rounds[rd];
+        t.tile_w = t.tile_h = 16;
+        core_write(tiled, &t);
+        expect_pixels(tiled, &t);
+        snprintf(args, sizeof args, "compare %s %s --json", tiled, scan);
+        rp_run r = rp_run_radpt(args);
+        cr_assert_eq(r.status, 0, "mipmap, round %d: %s", (int)rounds[rd], r.err);
+        cr_expect_eq(rp_json_number_after(r.out, "{", "rmse"), 0.0, "%s", r.out);
+        cr_expect_eq(rp_json_number_after(r.out, "{", "max_abs_diff"), 0.0, "%s", r.out);
+        rp_run_free(&r);
+    }
+    if (system("command -v exrmaketiled >/dev/null 2>&1") != 0)
+        cr_log_warn("exrmaketiled not installed: tiled files of the C++ library not checked");
+    else {
+        static const char *const opts[4] = {"-t 16 16", "-t 5 7 -z piz", "-m -t 16 16", "-r -u -t 16 16 -z rle"};
+        for (int o = 0; o < 4; o++) {
+            snprintf(args, sizeof args, "exrmaketiled %s '%s' '%s' >/dev/null 2>&1", opts[o], scan, tiled);
+            cr_assert_eq(system(args), 0, "%s", args);
+            core_exr t = s;
+            expect_pixels(tiled, &t);
+            snprintf(args, sizeof args, "compare %s %s --json", tiled, scan);
+            rp_run r = rp_run_radpt(args);
+            cr_assert_eq(r.status, 0, "exrmaketiled %s: %s", opts[o], r.err);
+            cr_expect_eq(rp_json_number_after(r.out, "{", "rmse"), 0.0, "exrmaketiled %s: %s", opts[o], r.out);
+            rp_run_free(&r);
+        }
+    }
+    cr_expect_eq(rp_test_rmtree(dir), 0);
 }

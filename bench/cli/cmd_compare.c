@@ -1,8 +1,8 @@
 /* radpt compare A.exr B.exr: image A against reference image B, with the
  * metrics the benchmarks use (bench/run/metrics.h: the same function, the
  * same definitions), on radpt's EXRs or other renderers' (pbrt, Blender:
- * half or float scanline images, channels R G B found by name or suffix,
- * alpha ignored).
+ * half or float, scanline or tiled images, channels R G B found by name or
+ * suffix, alpha ignored).
  *
  *   radpt compare A.exr B.exr [--json] [-o DIFF.png] [--scene SCENE [--camera WORDS]]
  *

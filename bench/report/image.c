@@ -324,63 +324,110 @@ rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *er
     return rp_temp_commit(fd, tmp, path, err);
 }
 
-/* Decodes every channel of part 0 into the planes (width * height floats
- * each, in the order of chlist). */
-static exr_result_t exr_read_pixels(exr_context_t ctx, const exr_attr_box2i_t *dw,
-                                    const exr_attr_chlist_t *chlist, float **planes,
-                                    const char **what)
+/* Decodes one chunk (a block of scanlines or a tile) into the planes
+ * (width x height floats each, in the order of chlist): the chunk's first
+ * pixel goes to (x0, y0) of the image, its rows width floats apart. */
+static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *cinfo,
+                                     exr_decode_pipeline_t *dec, int *initialised,
+                                     const exr_attr_chlist_t *chlist, float **planes, size_t width,
+                                     size_t height, size_t x0, size_t y0, const char **what)
 {
     exr_result_t rv;
-    int32_t lines_per_chunk = 0;
-    *what = "query scanlines per chunk";
-    if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines_per_chunk)) != EXR_ERR_SUCCESS)
-        return rv;
-    if (lines_per_chunk <= 0)
+    if (cinfo->width < 0 || cinfo->height < 0 || x0 + (size_t)cinfo->width > width ||
+        y0 + (size_t)cinfo->height > height) {
+        *what = "place chunk";
         return EXR_ERR_CORRUPT_CHUNK;
+    }
+    rv = *initialised ? exr_decoding_update(ctx, 0, cinfo, dec)
+                      : exr_decoding_initialize(ctx, 0, cinfo, dec);
+    if (rv != EXR_ERR_SUCCESS)
+        return rv;
+    /* Pointers and strides are set for every chunk: edge chunks (the last
+     * scanline block, the right and bottom tiles) are smaller. */
+    for (int16_t c = 0; c < dec->channel_count; c++) {
+        exr_coding_channel_info_t *ch = &dec->channels[c];
+        long k = -1;
+        for (int j = 0; j < chlist->num_channels; j++)
+            if (strcmp(chlist->entries[j].name.str, ch->channel_name) == 0)
+                k = j;
+        if (k < 0) {
+            *what = "match channel";
+            return EXR_ERR_CORRUPT_CHUNK;
+        }
+        /* Whatever the stored type (half, float, uint), ask for float. */
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+        ch->user_bytes_per_element = (int16_t)sizeof(float);
+        ch->user_pixel_stride = (int32_t)sizeof(float);
+        ch->user_line_stride = (int32_t)(width * sizeof(float));
+        ch->decode_to_ptr = (uint8_t *)(planes[k] + y0 * width + x0);
+    }
+    if (!*initialised) {
+        *what = "choose decoder";
+        if ((rv = exr_decoding_choose_default_routines(ctx, 0, dec)) != EXR_ERR_SUCCESS)
+            return rv;
+        *initialised = 1;
+    }
+    *what = "decode chunk";
+    return exr_decoding_run(ctx, 0, dec);
+}
 
+/* Decodes every channel of part 0 into the planes (width * height floats
+ * each, in the order of chlist).  A scanline part is read block by block;
+ * a tiled part tile by tile at level (0, 0), which in every level mode
+ * (one level, mipmap, ripmap) is the full-resolution image the data
+ * window describes (OpenEXR file layout, "Tiles"); tile (tx, ty) holds the
+ * pixels from (tx * tile width, ty * tile height) of the data window, and
+ * the right and bottom tiles are cut at its edge. */
+static exr_result_t exr_read_pixels(exr_context_t ctx, exr_storage_t storage,
+                                    const exr_attr_box2i_t *dw, const exr_attr_chlist_t *chlist,
+                                    float **planes, const char **what)
+{
+    exr_result_t rv = EXR_ERR_SUCCESS;
     size_t width = (size_t)((int64_t)dw->max.x - dw->min.x + 1);
+    size_t height = (size_t)((int64_t)dw->max.y - dw->min.y + 1);
     exr_decode_pipeline_t dec;
     memset(&dec, 0, sizeof dec);
     int initialised = 0;
-    for (int64_t y = dw->min.y; y <= dw->max.y; y += lines_per_chunk) {
-        exr_chunk_info_t cinfo;
-        *what = "read chunk";
-        if ((rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo)) != EXR_ERR_SUCCESS)
-            break;
-        rv = initialised ? exr_decoding_update(ctx, 0, &cinfo, &dec)
-                         : exr_decoding_initialize(ctx, 0, &cinfo, &dec);
-        if (rv != EXR_ERR_SUCCESS)
-            break;
-        for (int16_t c = 0; c < dec.channel_count; c++) {
-            exr_coding_channel_info_t *ch = &dec.channels[c];
-            long k = -1;
-            for (int j = 0; j < chlist->num_channels; j++)
-                if (strcmp(chlist->entries[j].name.str, ch->channel_name) == 0)
-                    k = j;
-            if (k < 0) {
-                *what = "match channel";
+    exr_chunk_info_t cinfo;
+    if (storage == EXR_STORAGE_SCANLINE) {
+        int32_t lines_per_chunk = 0;
+        *what = "query scanlines per chunk";
+        if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines_per_chunk)) != EXR_ERR_SUCCESS)
+            return rv;
+        if (lines_per_chunk <= 0)
+            return EXR_ERR_CORRUPT_CHUNK;
+        for (int64_t y = dw->min.y; y <= dw->max.y && rv == EXR_ERR_SUCCESS; y += lines_per_chunk) {
+            *what = "read chunk";
+            if ((rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo)) != EXR_ERR_SUCCESS)
+                break;
+            if (cinfo.start_y < dw->min.y) {
+                *what = "place chunk";
                 rv = EXR_ERR_CORRUPT_CHUNK;
                 break;
             }
-            /* Whatever the stored type (half, float, uint), ask for float. */
-            ch->user_data_type = EXR_PIXEL_FLOAT;
-            ch->user_bytes_per_element = (int16_t)sizeof(float);
-            ch->user_pixel_stride = (int32_t)sizeof(float);
-            ch->user_line_stride = (int32_t)(width * sizeof(float));
-            ch->decode_to_ptr =
-                (uint8_t *)(planes[k] + (size_t)((int64_t)cinfo.start_y - dw->min.y) * width);
+            rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, chlist, planes, width, height, 0,
+                                  (size_t)((int64_t)cinfo.start_y - dw->min.y), what);
         }
-        if (rv != EXR_ERR_SUCCESS)
-            break;
-        if (!initialised) {
-            *what = "choose decoder";
-            if ((rv = exr_decoding_choose_default_routines(ctx, 0, &dec)) != EXR_ERR_SUCCESS)
-                break;
-            initialised = 1;
+    } else {
+        int32_t tw = 0, th = 0, lw = 0, lh = 0;
+        *what = "query tile size";
+        if ((rv = exr_get_tile_sizes(ctx, 0, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS)
+            return rv;
+        *what = "query level size";
+        if ((rv = exr_get_level_sizes(ctx, 0, 0, 0, &lw, &lh)) != EXR_ERR_SUCCESS)
+            return rv;
+        if (tw <= 0 || th <= 0 || (size_t)lw != width || (size_t)lh != height) {
+            *what = "check tile layout";
+            return EXR_ERR_CORRUPT_CHUNK;
         }
-        *what = "decode chunk";
-        if ((rv = exr_decoding_run(ctx, 0, &dec)) != EXR_ERR_SUCCESS)
-            break;
+        for (int32_t ty = 0; (int64_t)ty * th < lh && rv == EXR_ERR_SUCCESS; ty++)
+            for (int32_t tx = 0; (int64_t)tx * tw < lw && rv == EXR_ERR_SUCCESS; tx++) {
+                *what = "read tile";
+                if ((rv = exr_read_tile_chunk_info(ctx, 0, tx, ty, 0, 0, &cinfo)) != EXR_ERR_SUCCESS)
+                    break;
+                rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, chlist, planes, width, height,
+                                      (size_t)tx * (size_t)tw, (size_t)ty * (size_t)th, what);
+            }
     }
     if (initialised || dec.channels)
         exr_decoding_destroy(ctx, &dec);
@@ -429,10 +476,10 @@ rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
     what = "query storage";
     if ((rv = exr_get_storage(ctx, 0, &storage)) != EXR_ERR_SUCCESS)
         goto exr_failed;
-    if (storage != EXR_STORAGE_SCANLINE) {
+    if (storage != EXR_STORAGE_SCANLINE && storage != EXR_STORAGE_TILED) {
         st = rp_error_set(err, RP_ERR_UNSUPPORTED,
-                          "%s: only scanline EXR images are supported (this one is tiled or deep)",
-                          path);
+                          "%s: a deep EXR image (several samples per pixel); radpt reads flat scanline "
+                          "and tiled images", path);
         goto done;
     }
     exr_attr_box2i_t dw;
@@ -480,7 +527,7 @@ rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
         memcpy(nm[c], s->str, (size_t)s->length);
         nm[c][s->length] = '\0';
     }
-    if ((rv = exr_read_pixels(ctx, &dw, chlist, pl, &what)) != EXR_ERR_SUCCESS)
+    if ((rv = exr_read_pixels(ctx, storage, &dw, chlist, pl, &what)) != EXR_ERR_SUCCESS)
         goto exr_failed;
 
     *width = (uint32_t)w;

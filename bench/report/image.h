@@ -30,8 +30,13 @@ typedef struct rp_image {
  * string metadata. */
 rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *err);
 
-/* Reads an EXR written by rp_image_write_exr back (all channels as float).
- * The caller frees *planes[i], *planes, *names[i] and *names with free(). */
+/* Reads part 0 of an EXR (rp_image_write_exr's, or another program's):
+ * every channel as float (half, float or uint stored, any compression
+ * OpenEXRCore decodes), the data window's pixels; scanline or tiled
+ * storage, a tiled image read at level 0 (mipmaps and ripmaps: the full
+ * resolution).  Deep and subsampled images are refused (RP_ERR_UNSUPPORTED);
+ * a missing or non-EXR file is RP_ERR_INPUT.  The caller frees
+ * *planes[i], *planes, *names[i] and *names with free(). */
 rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
                             size_t *nchannels, char ***names, float ***planes,
                             rp_error *err);
