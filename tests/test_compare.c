@@ -8,9 +8,11 @@
 #include <unistd.h>
 
 #include <OpenEXR/openexr.h>
+#include <png.h>
 
 #include "bench/report/image.h"
 #include "bench/run/metrics.h"
+#include "bench/run/load.h"
 #include "bench/run/reference.h"
 #include "cli_util.h"
 #include "scene_util.h"
@@ -458,5 +460,397 @@ Test(compare, tiled_levels_read_level_0)
             rp_run_free(&r);
         }
     }
+    cr_expect_eq(rp_test_rmtree(dir), 0);
+}
+
+/* ---------------------------------------------------------------------
+ * Masks (--mask): the pixels a PNG or EXR selects (any channel > 0), as
+ * --scene's benchmark mask leaves the others out. */
+
+/* A PNG written with libpng: type and depth as given, samples (channel
+ * fastest) as the file stores them (indices for a palette image, whose
+ * colours and tRNS alpha are given too). */
+typedef struct test_png {
+    int type, depth, interlace;
+    size_t nch;
+    const png_color *palette;
+    int npalette;
+    const png_byte *trns;
+    int ntrns;
+} test_png;
+
+static void write_png(const char *path, uint32_t w, uint32_t h, const test_png *t, const uint16_t *samples)
+{
+    FILE *f = fopen(path, "wb");
+    cr_assert_not_null(f, "%s", path);
+    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    cr_assert(png && info);
+    size_t bytes = t->depth == 16 ? 2 : 1, rowbytes = (size_t)w * t->nch * bytes;
+    png_bytep data = malloc(rowbytes * h);
+    png_bytepp rows = malloc(h * sizeof *rows);
+    cr_assert(data && rows);
+    for (uint32_t y = 0; y < h; y++) {
+        rows[y] = data + (size_t)y * rowbytes;
+        for (size_t i = 0; i < (size_t)w * t->nch; i++) {
+            uint16_t v = samples[(size_t)y * w * t->nch + i];
+            if (bytes == 2) {
+                rows[y][2 * i] = (png_byte)(v >> 8); /* PNG: big-endian */
+                rows[y][2 * i + 1] = (png_byte)v;
+            } else
+                rows[y][i] = (png_byte)v;
+        }
+    }
+    cr_assert_eq(setjmp(png_jmpbuf(png)), 0, "libpng failed writing %s", path);
+    png_init_io(png, f);
+    png_set_IHDR(png, info, w, h, t->depth, t->type, t->interlace, PNG_COMPRESSION_TYPE_DEFAULT,
+                 PNG_FILTER_TYPE_DEFAULT);
+    if (t->palette)
+        png_set_PLTE(png, info, t->palette, t->npalette);
+    if (t->trns)
+        png_set_tRNS(png, info, t->trns, t->ntrns, NULL);
+    png_write_info(png, info);
+    if (t->depth < 8)
+        png_set_packing(png); /* one sample per byte in, packed bits out */
+    png_set_interlace_handling(png);
+    png_write_image(png, rows);
+    png_write_end(png, NULL);
+    png_destroy_write_struct(&png, &info);
+    fclose(f);
+    free(data);
+    free(rows);
+}
+
+/* The RGB of every pixel of a PNG (libpng, 8-bit RGB files only). */
+static png_byte *read_png_rgb(const char *path, uint32_t *w, uint32_t *h)
+{
+    FILE *f = fopen(path, "rb");
+    cr_assert_not_null(f, "%s", path);
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    cr_assert(png && info);
+    cr_assert_eq(setjmp(png_jmpbuf(png)), 0, "libpng failed reading %s", path);
+    png_init_io(png, f);
+    png_read_info(png, info);
+    *w = png_get_image_width(png, info);
+    *h = png_get_image_height(png, info);
+    cr_assert_eq(png_get_color_type(png, info), PNG_COLOR_TYPE_RGB);
+    cr_assert_eq(png_get_bit_depth(png, info), 8);
+    png_byte *data = malloc((size_t)*w * *h * 3);
+    cr_assert_not_null(data);
+    for (uint32_t y = 0; y < *h; y++)
+        png_read_row(png, data + (size_t)y * *w * 3, NULL);
+    png_destroy_read_struct(&png, &info, NULL);
+    fclose(f);
+    return data;
+}
+
+enum { MW = 9, MH = 7 };
+
+/* The pixels the masks below select: a third of them, not the one with
+ * the largest difference (pixel 0). */
+static int mask_on(int i)
+{
+    return i % 3 == 1;
+}
+
+/* 9 x 7 RGB images A and B (B = reference) with a difference d(i, c) that
+ * is largest, 5, at the unselected pixel 0; the expected numbers over the
+ * selected pixels only, computed here. */
+typedef struct mask_case {
+    float a[3][MW * MH], b[3][MW * MH];
+    double rmse, mae, maxd, ratio[3];
+    int max_at;
+    size_t count;
+} mask_case;
+
+static void mask_case_write(mask_case *m, const char *pa, const char *pb, const unsigned char *extra)
+{
+    double sq = 0, ab = 0, sa[3] = {0}, sb[3] = {0};
+    m->maxd = -1;
+    m->count = 0;
+    for (int i = 0; i < MW * MH; i++) {
+        int on = mask_on(i) && (!extra || extra[i]);
+        m->count += (size_t)on;
+        for (int c = 0; c < 3; c++) {
+            m->b[c][i] = 0.25f * (float)(1 + (i + c) % 5);
+            double d = i == 0 ? 5 : 0.125 * ((i * 7 + c * 3) % 11) - 0.5;
+            m->a[c][i] = (float)(m->b[c][i] + d); /* exact: multiples of 1/8 */
+            if (!on)
+                continue;
+            sq += d * d;
+            ab += fabs(d);
+            sa[c] += m->a[c][i];
+            sb[c] += m->b[c][i];
+            if (fabs(d) > m->maxd) {
+                m->maxd = fabs(d);
+                m->max_at = i;
+            }
+        }
+    }
+    m->rmse = sqrt(sq / (3.0 * (double)m->count));
+    m->mae = ab / (3.0 * (double)m->count);
+    for (int c = 0; c < 3; c++)
+        m->ratio[c] = sa[c] / sb[c];
+    static const char *const names[3] = {"R", "G", "B"};
+    const float *pla[3] = {m->a[0], m->a[1], m->a[2]}, *plb[3] = {m->b[0], m->b[1], m->b[2]};
+    rp_image ia = {.width = MW, .height = MH, .nchannels = 3, .channel_names = names, .planes = pla};
+    rp_image ib = {.width = MW, .height = MH, .nchannels = 3, .channel_names = names, .planes = plb};
+    rp_error err;
+    cr_assert_eq(rp_image_write_exr(pa, &ia, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(rp_image_write_exr(pb, &ib, &err), RP_OK, "%s", err.message);
+}
+
+static void expect_mask_case(const mask_case *m, const char *json, const char *what)
+{
+    cr_expect_eq(rp_json_number_after(json, "{", "pixels_compared"), (double)m->count, "%s: %s", what, json);
+    double got = rp_json_number_after(json, "{", "rmse");
+    cr_expect(fabs(got - m->rmse) <= 1e-8 * m->rmse, "%s: RMSE %.9g, expected %.9g", what, got, m->rmse);
+    got = rp_json_number_after(json, "{", "mae");
+    cr_expect(fabs(got - m->mae) <= 1e-8 * m->mae, "%s: MAE %.9g, expected %.9g", what, got, m->mae);
+    cr_expect_eq(rp_json_number_after(json, "{", "max_abs_diff"), m->maxd, "%s: %s", what, json);
+    cr_expect_eq(rp_json_number_after(json, "max_at", "x"), (double)(m->max_at % MW), "%s: %s", what, json);
+    cr_expect_eq(rp_json_number_after(json, "max_at", "y"), (double)(m->max_at / MW), "%s: %s", what, json);
+    got = rp_json_number_after(json, "\"channel\": \"B\", \"a\"", "ratio");
+    cr_expect(fabs(got - m->ratio[2]) <= 1e-8, "%s: B ratio %.9g, expected %.9g", what, got, m->ratio[2]);
+}
+
+/* The same pixels selected by masks of every PNG colour type, each with
+ * the smallest value that counts in a different channel (8-bit 1; 16-bit
+ * 1 and 256, low and high byte), by an interlaced 1-bit grey PNG, a
+ * palette PNG whose unselected colour is opaque black by tRNS (not a
+ * channel), and an EXR mask whose unselected values are 0, -1 and NaN:
+ * every number is the one computed here over those pixels alone, and the
+ * difference image is grey exactly where pixels are left out. */
+Test(compare, mask_selects_pixels)
+{
+    static mask_case m;
+    char dir[64], a[96], b[96], mk[96], diff[96], args[500];
+    cr_assert_eq(rp_test_tmpdir(dir, sizeof dir, "rp-compare-mask"), 0);
+    snprintf(a, sizeof a, "%s/a.exr", dir);
+    snprintf(b, sizeof b, "%s/b.exr", dir);
+    snprintf(diff, sizeof diff, "%s/diff.png", dir);
+    mask_case_write(&m, a, b, NULL);
+    cr_assert_eq(m.count, 21);
+
+    static const png_color pal[2] = {{0, 0, 0}, {0, 0, 1}};
+    static const png_byte opaque[2] = {255, 255};
+    struct {
+        const char *name;
+        test_png t;
+        uint16_t on[4];
+    } kinds[] = {
+        {"grey8", {PNG_COLOR_TYPE_GRAY, 8, PNG_INTERLACE_NONE, 1, NULL, 0, NULL, 0}, {1}},
+        {"grey16", {PNG_COLOR_TYPE_GRAY, 16, PNG_INTERLACE_NONE, 1, NULL, 0, NULL, 0}, {1}},
+        {"grey1-interlaced", {PNG_COLOR_TYPE_GRAY, 1, PNG_INTERLACE_ADAM7, 1, NULL, 0, NULL, 0}, {1}},
+        {"grey-alpha8", {PNG_COLOR_TYPE_GRAY_ALPHA, 8, PNG_INTERLACE_NONE, 2, NULL, 0, NULL, 0}, {0, 1}},
+        {"grey-alpha16", {PNG_COLOR_TYPE_GRAY_ALPHA, 16, PNG_INTERLACE_NONE, 2, NULL, 0, NULL, 0}, {256, 0}},
+        {"rgb8", {PNG_COLOR_TYPE_RGB, 8, PNG_INTERLACE_NONE, 3, NULL, 0, NULL, 0}, {0, 0, 1}},
+        {"rgb16", {PNG_COLOR_TYPE_RGB, 16, PNG_INTERLACE_NONE, 3, NULL, 0, NULL, 0}, {0, 256, 0}},
+        {"rgba8", {PNG_COLOR_TYPE_RGB_ALPHA, 8, PNG_INTERLACE_NONE, 4, NULL, 0, NULL, 0}, {1, 0, 0, 0}},
+        {"rgba16", {PNG_COLOR_TYPE_RGB_ALPHA, 16, PNG_INTERLACE_ADAM7, 4, NULL, 0, NULL, 0}, {0, 0, 0, 1}},
+        {"palette4-trns", {PNG_COLOR_TYPE_PALETTE, 4, PNG_INTERLACE_NONE, 1, pal, 2, opaque, 2}, {1}},
+    };
+    for (size_t k = 0; k < sizeof kinds / sizeof kinds[0]; k++) {
+        uint16_t s[MW * MH * 4] = {0};
+        for (int i = 0; i < MW * MH; i++)
+            for (size_t c = 0; c < kinds[k].t.nch; c++)
+                s[(size_t)i * kinds[k].t.nch + c] = mask_on(i) ? kinds[k].on[c] : 0;
+        snprintf(mk, sizeof mk, "%s/%s.png", dir, kinds[k].name);
+        write_png(mk, MW, MH, &kinds[k].t, s);
+        snprintf(args, sizeof args, "compare %s %s --json --mask %s", a, b, mk);
+        rp_run r = rp_run_radpt(args);
+        cr_assert_eq(r.status, 0, "%s: %s", kinds[k].name, r.err);
+        expect_mask_case(&m, r.out, kinds[k].name);
+        cr_expect(strstr(r.out, "\"mask\": \"file\""), "%s", r.out);
+        rp_run_free(&r);
+    }
+
+    /* an EXR mask: > 0 selects; 0, -1 and NaN do not */
+    float y[MW * MH];
+    for (int i = 0; i < MW * MH; i++)
+        y[i] = mask_on(i) ? 0.5f : (i % 3 == 0 ? 0.0f : (i % 2 ? -1.0f : NAN));
+    const char *yn[1] = {"Y"};
+    const float *yp[1] = {y};
+    rp_image iy = {.width = MW, .height = MH, .nchannels = 1, .channel_names = yn, .planes = yp};
+    rp_error err;
+    snprintf(mk, sizeof mk, "%s/mask.exr", dir);
+    cr_assert_eq(rp_image_write_exr(mk, &iy, &err), RP_OK, "%s", err.message);
+    snprintf(args, sizeof args, "compare %s %s --json --mask %s -o %s", a, b, mk, diff);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    expect_mask_case(&m, r.out, "EXR mask");
+    rp_run_free(&r);
+
+    /* grey, sRGB-encoded 0.5 (IEC 61966-2-1), exactly at the pixels left out */
+    const png_byte grey = (png_byte)floor(255 * (1.055 * pow(0.5, 1 / 2.4) - 0.055) + 0.5);
+    uint32_t dw, dh;
+    png_byte *rgb = read_png_rgb(diff, &dw, &dh);
+    cr_assert_eq(dw * dh, MW * MH);
+    for (int i = 0; i < MW * MH; i++) {
+        int is_grey = rgb[3 * i] == grey && rgb[3 * i + 1] == grey && rgb[3 * i + 2] == grey;
+        if (!mask_on(i))
+            cr_expect(is_grey, "pixel %d left out but coloured %u %u %u", i, rgb[3 * i], rgb[3 * i + 1],
+                      rgb[3 * i + 2]);
+    }
+    /* the largest compared difference is at full colour, not grey */
+    const png_byte *mx = rgb + 3 * m.max_at;
+    cr_expect(!(mx[0] == grey && mx[1] == grey && mx[2] == grey), "pixel %d", m.max_at);
+    free(rgb);
+
+    /* without a mask, pixel 0's difference of 5 is the largest */
+    snprintf(args, sizeof args, "compare %s %s --json", a, b);
+    r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect_eq(rp_json_number_after(r.out, "{", "max_abs_diff"), 5.0, "%s", r.out);
+    cr_expect_eq(rp_json_number_after(r.out, "{", "pixels_compared"), (double)(MW * MH), "%s", r.out);
+    rp_run_free(&r);
+    cr_expect_eq(rp_test_rmtree(dir), 0);
+}
+
+#define CORNELL_9X7 "eye 278 273 -800 look 278 273 0 up 0 1 0 fov 39.3077 size 9 7"
+
+/* --mask with --scene counts the pixels both select: the numbers are the
+ * ones computed here over that intersection (the benchmarks' mask of the
+ * Cornell box seen at 9 x 7 from rp_reference_pixel_mask); a mask that
+ * selects only pixels the benchmarks leave out is refused. */
+Test(compare, mask_and_scene_intersect)
+{
+    rp_scene *scene = NULL;
+    rp_error err;
+    cr_assert_eq(rp_load_scene("scenes/cornell.scene", CORNELL_9X7, 1, &scene, &err), RP_OK, "%s", err.message);
+    unsigned char ref[MW * MH], in[MW * MH];
+    size_t nref = 0, nin = 0;
+    cr_assert_eq(rp_reference_pixel_mask(scene, ref, &nref, &err), RP_OK, "%s", err.message);
+    rp_scene_destroy(scene);
+    for (int i = 0; i < MW * MH; i++) {
+        in[i] = mask_on(i) && ref[i];
+        nin += in[i];
+    }
+    cr_assert(nin > 0 && nin < 21 && nref < MW * MH, "%zu of %zu measured pixels masked", nin, nref);
+
+    static mask_case m;
+    char dir[64], a[96], b[96], mk[96], args[600];
+    cr_assert_eq(rp_test_tmpdir(dir, sizeof dir, "rp-compare-mask-scene"), 0);
+    snprintf(a, sizeof a, "%s/a.exr", dir);
+    snprintf(b, sizeof b, "%s/b.exr", dir);
+    snprintf(mk, sizeof mk, "%s/mask.png", dir);
+    mask_case_write(&m, a, b, ref);
+    cr_assert_eq(m.count, nin);
+    test_png t = {PNG_COLOR_TYPE_GRAY, 8, PNG_INTERLACE_NONE, 1, NULL, 0, NULL, 0};
+    uint16_t s[MW * MH];
+    for (int i = 0; i < MW * MH; i++)
+        s[i] = mask_on(i) ? 255 : 0;
+    write_png(mk, MW, MH, &t, s);
+    snprintf(args, sizeof args, "compare %s %s --json --mask %s --scene scenes/cornell.scene --camera '%s'", a, b, mk,
+             CORNELL_9X7);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    expect_mask_case(&m, r.out, "mask and scene");
+    cr_expect(strstr(r.out, "\"mask\": \"file and reference\""), "%s", r.out);
+    rp_run_free(&r);
+    /* the text form says which pixels count */
+    snprintf(args, sizeof args, "compare %s %s --mask %s --scene scenes/cornell.scene --camera '%s'", a, b, mk,
+             CORNELL_9X7);
+    r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    char want[200];
+    snprintf(want, sizeof want, "%zu pixels compared (the pixels %s selects among the benchmarks' measured", nin, mk);
+    cr_expect(strstr(r.out, want), "%s", r.out);
+    rp_run_free(&r);
+
+    /* only pixels the benchmarks leave out: nothing to compare */
+    size_t nout = 0;
+    for (int i = 0; i < MW * MH; i++) {
+        s[i] = ref[i] ? 0 : 7;
+        nout += !ref[i];
+    }
+    write_png(mk, MW, MH, &t, s);
+    snprintf(args, sizeof args, "compare %s %s --mask %s --scene scenes/cornell.scene --camera '%s'", a, b, mk,
+             CORNELL_9X7);
+    r = rp_run_radpt(args);
+    cr_expect_eq(r.status, 2, "%s", r.err);
+    snprintf(want, sizeof want, "--mask %s selects %zu pixels, none of them among the %zu", mk, nout, nref);
+    cr_expect(strstr(r.err, want) && strstr(r.err, "scenes/cornell.scene"), "%s", r.err);
+    rp_run_free(&r);
+    cr_expect_eq(rp_test_rmtree(dir), 0);
+}
+
+/* Every bad mask exits 2 naming the file: missing, not a PNG, a PNG cut
+ * short or corrupt, another size (both sizes named, PNG and EXR), no pixel
+ * selected; --mask without a file is a usage error. */
+Test(compare, mask_bad_inputs)
+{
+    static mask_case m;
+    char dir[64], a[96], b[96], mk[96], args[600];
+    cr_assert_eq(rp_test_tmpdir(dir, sizeof dir, "rp-compare-mask-bad"), 0);
+    snprintf(a, sizeof a, "%s/a.exr", dir);
+    snprintf(b, sizeof b, "%s/b.exr", dir);
+    mask_case_write(&m, a, b, NULL);
+    test_png t = {PNG_COLOR_TYPE_GRAY, 8, PNG_INTERLACE_NONE, 1, NULL, 0, NULL, 0};
+    uint16_t ones[MW * MH], zeros[MW * MH] = {0};
+    for (int i = 0; i < MW * MH; i++)
+        ones[i] = 255;
+
+    struct {
+        const char *name, *says;
+    } cases[] = {
+        {"absent.png", "cannot open the mask: No such file"},
+        {"text.png", "not a PNG"},
+        {"cut.png", "cannot read PNG"},
+        {"corrupt.png", "cannot read PNG"},
+        {"small.png", "the mask is 5 x 4 but the images are 9 x 7"},
+        {"small.exr", "the mask is 3 x 2 but the images are 9 x 7"},
+        {"zeros.png", "the mask selects no pixel"},
+    };
+    char path[128];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/text.png", dir);
+    cr_assert_not_null(f = fopen(path, "w"));
+    fputs("P2 9 7 255\n", f);
+    fclose(f);
+    /* a whole PNG, then its first 40 bytes (signature, IHDR, no data) */
+    snprintf(path, sizeof path, "%s/whole.png", dir);
+    write_png(path, MW, MH, &t, ones);
+    char *whole = rp_read_file(path);
+    cr_assert_not_null(whole);
+    snprintf(path, sizeof path, "%s/cut.png", dir);
+    cr_assert_not_null(f = fopen(path, "wb"));
+    fwrite(whole, 1, 40, f);
+    fclose(f);
+    /* signature and IHDR intact, the rest garbage */
+    snprintf(path, sizeof path, "%s/corrupt.png", dir);
+    cr_assert_not_null(f = fopen(path, "wb"));
+    fwrite(whole, 1, 33, f);
+    for (int i = 0; i < 64; i++)
+        fputc(0x5a, f);
+    fclose(f);
+    free(whole);
+    snprintf(path, sizeof path, "%s/small.png", dir);
+    write_png(path, 5, 4, &t, ones);
+    snprintf(path, sizeof path, "%s/zeros.png", dir);
+    write_png(path, MW, MH, &t, zeros);
+    const char *yn[1] = {"Y"};
+    const float y6[6] = {1, 1, 1, 1, 1, 1}, *yp[1] = {y6};
+    rp_image iy = {.width = 3, .height = 2, .nchannels = 1, .channel_names = yn, .planes = yp};
+    rp_error err;
+    snprintf(path, sizeof path, "%s/small.exr", dir);
+    cr_assert_eq(rp_image_write_exr(path, &iy, &err), RP_OK, "%s", err.message);
+
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        snprintf(mk, sizeof mk, "%s/%s", dir, cases[k].name);
+        snprintf(args, sizeof args, "compare %s %s --mask %s", a, b, mk);
+        rp_run r = rp_run_radpt(args);
+        cr_expect_eq(r.status, 2, "%s: exit %d: %s", cases[k].name, r.status, r.err);
+        cr_expect(strstr(r.err, mk), "%s: the message does not name the file: %s", cases[k].name, r.err);
+        cr_expect(strstr(r.err, cases[k].says), "%s: %s", cases[k].name, r.err);
+        cr_expect_eq(r.out[0], '\0', "%s: %s", cases[k].name, r.out);
+        rp_run_free(&r);
+    }
+    snprintf(args, sizeof args, "compare %s %s --mask", a, b);
+    rp_run r = rp_run_radpt(args);
+    cr_expect_eq(r.status, 2);
+    cr_expect(strstr(r.err, "--mask"), "%s", r.err);
+    rp_run_free(&r);
     cr_expect_eq(rp_test_rmtree(dir), 0);
 }

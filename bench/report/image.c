@@ -759,6 +759,125 @@ static int png_encode(png_structp png, png_infop info, FILE *fp, uint32_t width,
 }
 
 /* ---------------------------------------------------------------------
+ * PNG input */
+
+/* What one read allocates, kept outside png_decode's frame so that a
+ * longjmp out of libpng leaves it to be freed. */
+typedef struct png_in {
+    png_bytep data;  /* the rows as libpng delivers them */
+    png_bytepp rows;
+    uint16_t *samples;
+    uint32_t width, height;
+    size_t channels;
+} png_in;
+
+/* Everything that touches libpng after setjmp (see png_encode).  The
+ * signature's 8 bytes are already read.  Grey below 8 bits is widened
+ * (png_set_expand_gray_1_2_4_to_8: 0 stays 0), a palette index is looked
+ * up in PLTE; no tRNS expansion, no gamma or 16-to-8 reduction, so every
+ * sample keeps its stored value (8 or 16 bits; 16-bit rows are
+ * big-endian, PNG spec 7.1). */
+static int png_decode(png_structp png, png_infop info, FILE *fp, png_in *in)
+{
+    if (setjmp(png_jmpbuf(png)))
+        return -1;
+    png_init_io(png, fp);
+    png_set_sig_bytes(png, 8);
+    png_read_info(png, info);
+    int type = png_get_color_type(png, info);
+    if (type == PNG_COLOR_TYPE_PALETTE)
+        png_set_packing(png); /* one index per byte */
+    else if (png_get_bit_depth(png, info) < 8)
+        png_set_expand_gray_1_2_4_to_8(png);
+    png_set_interlace_handling(png);
+    png_read_update_info(png, info);
+    png_uint_32 w = png_get_image_width(png, info), h = png_get_image_height(png, info);
+    size_t rowbytes = png_get_rowbytes(png, info), nch = png_get_channels(png, info);
+    int wide = png_get_bit_depth(png, info) == 16;
+    png_colorp palette = NULL;
+    int npalette = 0;
+    if (type == PNG_COLOR_TYPE_PALETTE && !png_get_PLTE(png, info, &palette, &npalette))
+        png_error(png, "palette image without a PLTE chunk");
+    size_t outch = type == PNG_COLOR_TYPE_PALETTE ? 3 : nch;
+    if (w == 0 || h == 0 || rowbytes > SIZE_MAX / h || (size_t)w * h > SIZE_MAX / sizeof(uint16_t) / outch)
+        png_error(png, "image too large");
+    if (!(in->data = malloc(rowbytes * h)) || !(in->rows = malloc(h * sizeof *in->rows)) ||
+        !(in->samples = malloc((size_t)w * h * outch * sizeof *in->samples)))
+        png_error(png, "out of memory");
+    for (png_uint_32 y = 0; y < h; y++)
+        in->rows[y] = in->data + (size_t)y * rowbytes;
+    png_read_image(png, in->rows);
+    png_read_end(png, NULL);
+    for (png_uint_32 y = 0; y < h; y++) {
+        const png_byte *row = in->rows[y];
+        uint16_t *out = in->samples + (size_t)y * w * outch;
+        for (png_uint_32 x = 0; x < w; x++) {
+            if (type == PNG_COLOR_TYPE_PALETTE) {
+                if (row[x] >= npalette)
+                    png_error(png, "palette index out of range");
+                out[3 * (size_t)x + 0] = palette[row[x]].red;
+                out[3 * (size_t)x + 1] = palette[row[x]].green;
+                out[3 * (size_t)x + 2] = palette[row[x]].blue;
+                continue;
+            }
+            for (size_t c = 0; c < nch; c++) {
+                size_t i = (size_t)x * nch + c;
+                out[i] = wide ? (uint16_t)(row[2 * i] << 8 | row[2 * i + 1]) : row[i];
+            }
+        }
+    }
+    in->width = w;
+    in->height = h;
+    in->channels = outch;
+    return 0;
+}
+
+rp_status rp_image_read_png(const char *path, uint32_t *width, uint32_t *height, size_t *channels,
+                            uint16_t **samples, rp_error *err)
+{
+    *width = *height = 0;
+    *channels = 0;
+    *samples = NULL;
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: cannot open: %s", path, strerror(errno));
+    png_byte sig[8];
+    size_t got = fread(sig, 1, sizeof sig, fp);
+    if (got != sizeof sig && ferror(fp)) {
+        int e = errno;
+        fclose(fp);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: cannot read: %s", path, strerror(e));
+    }
+    if (got != sizeof sig || png_sig_cmp(sig, 0, sizeof sig) != 0) {
+        fclose(fp);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: not a PNG file (no PNG signature)", path);
+    }
+    png_capture cap = {{0}};
+    png_in in = {0};
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &cap, png_capture_error, png_ignore_warning);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    int rc = -1;
+    if (png && info)
+        rc = png_decode(png, info, fp, &in);
+    else
+        snprintf(cap.message, sizeof cap.message, "cannot create libpng structures");
+    png_destroy_read_struct(png ? &png : NULL, info ? &info : NULL, NULL);
+    fclose(fp);
+    free(in.data);
+    free(in.rows);
+    if (rc != 0) {
+        free(in.samples);
+        return rp_error_set(err, strcmp(cap.message, "out of memory") ? RP_ERR_INPUT : RP_ERR_NOMEM,
+                            "%s: cannot read PNG: %s", path, cap.message);
+    }
+    *width = in.width;
+    *height = in.height;
+    *channels = in.channels;
+    *samples = in.samples;
+    return RP_OK;
+}
+
+/* ---------------------------------------------------------------------
  * PFM */
 
 rp_status rp_image_write_pfm(const char *path, uint32_t width, uint32_t height, const float *r, const float *g,
