@@ -854,3 +854,57 @@ Test(compare, mask_bad_inputs)
     rp_run_free(&r);
     cr_expect_eq(rp_test_rmtree(dir), 0);
 }
+
+/* The difference image's colours as help and README give them: an image
+ * against itself is 0 everywhere, crimson (sRGB 0.80, 0.20, 0.35, the
+ * middle of rp_colormap's ramp) where compared and mid grey (linear 0.5,
+ * sRGB-encoded by IEC 61966-2-1) where the mask leaves pixels out. */
+Test(compare, diff_image_colours)
+{
+    static mask_case m;
+    char dir[64], a[96], b[96], mk[96], diff[96], args[600];
+    cr_assert_eq(rp_test_tmpdir(dir, sizeof dir, "rp-compare-colours"), 0);
+    snprintf(a, sizeof a, "%s/a.exr", dir);
+    snprintf(b, sizeof b, "%s/b.exr", dir);
+    snprintf(mk, sizeof mk, "%s/mask.png", dir);
+    snprintf(diff, sizeof diff, "%s/diff.png", dir);
+    mask_case_write(&m, a, b, NULL);
+    test_png t = {PNG_COLOR_TYPE_GRAY, 8, PNG_INTERLACE_NONE, 1, NULL, 0, NULL, 0};
+    uint16_t s[MW * MH];
+    for (int i = 0; i < MW * MH; i++)
+        s[i] = mask_on(i) ? 255 : 0;
+    write_png(mk, MW, MH, &t, s);
+    snprintf(args, sizeof args, "compare %s %s --mask %s -o %s", a, a, mk, diff);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect(strstr(r.out, "dark blue -0 .. crimson 0 .. yellow +0"), "%s", r.out);
+    rp_run_free(&r);
+    const int grey = (int)floor(255 * (1.055 * pow(0.5, 1 / 2.4) - 0.055) + 0.5);
+    const int crimson[3] = {204, 51, 89}; /* 255 x (0.80, 0.20, 0.35) */
+    uint32_t w, h;
+    png_byte *rgb = read_png_rgb(diff, &w, &h);
+    for (int i = 0; i < MW * MH; i++)
+        for (int c = 0; c < 3; c++) {
+            int want = mask_on(i) ? crimson[c] : grey;
+            /* +-1: sRGB decoded to linear and encoded again */
+            cr_expect(abs(rgb[3 * i + c] - want) <= 1, "pixel %d channel %d: %d, want %d", i, c, rgb[3 * i + c], want);
+        }
+    free(rgb);
+    cr_expect_eq(rp_test_rmtree(dir), 0);
+}
+
+/* radpt help compare says what counts; radpt help points to it. */
+Test(compare, help)
+{
+    rp_run r = rp_run_radpt("help compare");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    const char *says[] = {"--mask FILE", "any channel of FILE is > 0", "the pixels both select", "tiled",
+                          "opaque black", "crimson at 0"};
+    for (size_t i = 0; i < sizeof says / sizeof says[0]; i++)
+        cr_expect(strstr(r.out, says[i]), "help compare lacks \"%s\"", says[i]);
+    rp_run_free(&r);
+    r = rp_run_radpt("help");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    cr_expect(strstr(r.out, "[--mask MASK.png|MASK.exr]") && strstr(r.out, "radpt help compare"), "%s", r.out);
+    rp_run_free(&r);
+}

@@ -81,6 +81,53 @@ static int pick_channels(const loaded *a, const loaded *b, long ia[3], long ib[3
     return ia[0] >= 0 && ib[0] >= 0;
 }
 
+void rp_cmd_compare_help(FILE *f)
+{
+    fputs("radpt compare A.exr B.exr [--json] [-o DIFF.png] [--mask MASK.png|MASK.exr]\n"
+          "              [--scene SCENE [--camera WORDS]]\n"
+          "\n"
+          "Scores image A against the reference B with the benchmarks' own metric function\n"
+          "(bench/run/metrics.c): RMSE, relMSE ((A - B)^2 / (B^2 + 0.01), Rousselle et al. 2011)\n"
+          "and MAE over every channel of R, G, B (Y unless both images have R, G, B), the\n"
+          "per-channel means of A and B and their ratio, and the largest |A - B| with its\n"
+          "pixel and channel.\n"
+          "\n"
+          "Images: OpenEXR (part 0), scanline or tiled (mipmaps and ripmaps: level 0),\n"
+          "half, float or uint channels, any compression OpenEXRCore reads; from radpt or\n"
+          "any renderer. Channels are found by name or by suffix (Blender's\n"
+          "ViewLayer.Combined.R); alpha is ignored. A and B must have the same size. Deep\n"
+          "and subsampled images are refused.\n"
+          "\n"
+          "Which pixels count (every pixel without --scene and --mask):\n"
+          "  --scene SCENE  the pixels the benchmarks measure: fully covered by front faces\n"
+          "                 of surfaces that reflect (the light, silhouettes and background\n"
+          "                 left out), so the RMSE is the one radpt bench reports; the\n"
+          "                 scene's camera (or --camera WORDS) must have the images' size\n"
+          "  --mask FILE    the pixels where any channel of FILE is > 0, FILE of the images'\n"
+          "                 size. PNG: grey, grey+alpha, RGB or RGBA, 8 or 16 bits (grey also\n"
+          "                 1, 2 or 4): alpha is a channel like the others, so an opaque black\n"
+          "                 pixel of an RGBA mask counts; a palette PNG by its colours' R, G, B\n"
+          "                 (tRNS transparency is not a channel). EXR: any channel > 0 (0,\n"
+          "                 negative and NaN do not count). The kind is read from the file's\n"
+          "                 first bytes, not its name.\n"
+          "  both           the pixels both select: the mask narrows the benchmarks' pixels.\n"
+          "Pixels left out count in no metric, mean or maximum, and are grey in DIFF.png.\n"
+          "\n"
+          "  -o DIFF.png    A - B (mean over the channels) in false colour: dark blue at minus\n"
+          "                 the largest difference, crimson at 0, yellow at plus it\n"
+          "  --json         one object: a, reference, mask_file (with --mask), width, height,\n"
+          "                 channels, pixels_compared, mask (all, reference, file, or file and\n"
+          "                 reference), rmse, relmse, mae, max_abs_diff, max_at {x, y,\n"
+          "                 channel}, channel_means [{channel, a, reference, ratio}]\n"
+          "\n"
+          "Exit status 2, with a message naming the file: an image that is missing or not an\n"
+          "EXR, or holds a non-finite value; images of different sizes or without common\n"
+          "channels; a scene whose camera has another size; a mask that is missing, not a\n"
+          "PNG or EXR, cut short or corrupt, of another size, or selects no pixel (with\n"
+          "--scene: none of the measured ones).\n",
+          f);
+}
+
 int rp_cmd_compare(int argc, char **argv)
 {
     const char *files[2] = {NULL, NULL}, *out = NULL, *scene_path = NULL, *camera = NULL, *mask_path = NULL;
@@ -224,8 +271,9 @@ int rp_cmd_compare(int argc, char **argv)
             st = rp_error_set(&err, RP_ERR_INPUT, "--scene %s: no pixel is measured", scene_path);
     }
     if (st == RP_OK && out) {
-        /* signed difference A - B through the false-colour map, -maxd blue
-         * to +maxd red, grey where the mask leaves a pixel out */
+        /* signed difference A - B through the false-colour ramp
+         * (rp_colormap), -maxd dark blue, 0 crimson, +maxd yellow; grey,
+         * which the ramp never gives, where the mask leaves a pixel out */
         float *pl[3];
         for (int c = 0; c < 3; c++)
             pl[c] = malloc(npix * sizeof *pl[c]);
@@ -288,7 +336,8 @@ int rp_cmd_compare(int argc, char **argv)
                 printf("mean %s: A %.6g, reference %.6g, ratio %.6g\n", nb == 3 ? (const char *[]){"R", "G", "B"}[c] : "Y",
                        mean_a[c], mean_b[c], mean_b[c] != 0 ? mean_a[c] / mean_b[c] : NAN);
             if (out)
-                printf("wrote %s: A - B, channel mean, blue -%.3g .. grey 0 .. red +%.3g\n", out, maxd, maxd);
+                printf("wrote %s: A - B, channel mean, dark blue -%.3g .. crimson 0 .. yellow +%.3g\n", out, maxd,
+                       maxd);
         }
     }
     free(x);
