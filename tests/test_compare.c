@@ -1,5 +1,7 @@
 /* radpt compare: the same metric as the benchmarks (one function, one
- * mask), channel names as other renderers write them, and clear refusals. */
+ * mask), channel names as other renderers write them, tiled EXRs read as
+ * their scanline twins, masks from PNG and EXR files, and clear refusals.
+ * Expected numbers are computed here from the values the tests write. */
 #include <criterion/criterion.h>
 #include <math.h>
 #include <stdio.h>
@@ -11,8 +13,8 @@
 #include <png.h>
 
 #include "bench/report/image.h"
-#include "bench/run/metrics.h"
 #include "bench/run/load.h"
+#include "bench/run/metrics.h"
 #include "bench/run/reference.h"
 #include "cli_util.h"
 #include "scene_util.h"
