@@ -65,13 +65,17 @@ static void print_usage(FILE *f)
           "      random, stratified and Sobol' sampling: RMSE against the cached reference over\n"
           "      its measured pixels (the benchmarks' metric), and MSE x seconds, which ranks\n"
           "      them at equal time\n"
-          "  radpt compare A.exr B.exr [--json] [-o DIFF.png] [--scene SCENE [--camera WORDS]]\n"
+          "  radpt compare A.exr B.exr [--json] [-o DIFF.png] [--mask MASK.png|MASK.exr]\n"
+          "               [--scene SCENE [--camera WORDS]]\n"
           "      image A against the reference B with the benchmarks' metrics (RMSE, relMSE with\n"
           "      eps 0.01, MAE over every channel of R,G,B or Y; per-channel means and their ratio;\n"
-          "      the largest difference and where); half or float EXRs from any renderer;\n"
-          "      --scene: only the pixels benchmarks measure; -o: false-colour A - B\n"
-          "  radpt help [METHOD | experiment NAME]\n"
-          "      this text, a method's options, or what an experiment runs and checks\n"
+          "      the largest difference and where); half or float, scanline or tiled EXRs from any\n"
+          "      renderer; --scene: only the pixels benchmarks measure; --mask: only where a channel\n"
+          "      of the mask (PNG or EXR) is > 0; both: the pixels both select; -o: false-colour\n"
+          "      A - B (radpt help compare: the details)\n"
+          "  radpt help [METHOD | compare | experiment NAME]\n"
+          "      this text, a method's options, compare in detail, or what an experiment runs and\n"
+          "      checks\n"
           "  radpt --version\n"
           "      the release, and whether MPI was initialised (only under mpirun)\n"
           "  radpt COMMAND ... --plugin PATH.so\n"
@@ -159,6 +163,10 @@ static int dispatch(int argc, char **argv)
     if (!strcmp(cmd, "help") || !strcmp(cmd, "--help") || !strcmp(cmd, "-h")) {
         if (argc > 2 && !strcmp(argv[2], "experiment"))
             return print_experiment(argc > 3 ? argv[3] : NULL);
+        if (argc > 2 && !strcmp(argv[2], "compare")) {
+            rp_cmd_compare_help(stdout);
+            return 0;
+        }
         if (argc > 2)
             return print_method(argv[2]);
         print_usage(stdout);

@@ -157,6 +157,29 @@ static long plane_index(const rp_image *img, const char *name)
     return -1;
 }
 
+/* OpenEXRCore 3.1's ZIP, ZIPS and PXR24 encoders keep a compressed chunk
+ * exactly as large as the raw data, which readers (OpenEXRCore and the C++
+ * library alike) then take for raw data: in the file layout a chunk whose
+ * stored size equals its raw size is uncompressed.  A 5 x 1 float image
+ * 0, 0.25, 0, 0.25, 0 read back as zlib bytes.  Upstream fixed ZIP later
+ * (openexr PR #2307, "compbufsz >= packed_bytes").  This wraps the chosen
+ * compressor and stores such a chunk raw, as the library does with one
+ * that grew. */
+typedef struct exr_compress_guard {
+    exr_result_t (*compress)(exr_encode_pipeline_t *enc);
+} exr_compress_guard;
+
+static exr_result_t exr_compress_guarded(exr_encode_pipeline_t *enc)
+{
+    const exr_compress_guard *g = enc->encoding_user_data;
+    exr_result_t rv = g->compress(enc);
+    if (rv == EXR_ERR_SUCCESS && enc->compressed_bytes >= enc->packed_bytes) {
+        memcpy(enc->compressed_buffer, enc->packed_buffer, (size_t)enc->packed_bytes);
+        enc->compressed_bytes = (size_t)enc->packed_bytes;
+    }
+    return rv;
+}
+
 /* Header and pixels of one scanline part.  Returns the failing call's
  * result, with *what naming the step. */
 static exr_result_t exr_write_image(exr_context_t ctx, const rp_image *img, int longnames,
@@ -202,6 +225,7 @@ static exr_result_t exr_write_image(exr_context_t ctx, const rp_image *img, int 
 
     exr_encode_pipeline_t enc;
     memset(&enc, 0, sizeof enc);
+    exr_compress_guard guard = {NULL};
     int initialised = 0;
     int32_t line_stride = (int32_t)(img->width * sizeof(float));
     for (int32_t y = 0; y < (int32_t)img->height; y += lines_per_chunk) {
@@ -238,6 +262,11 @@ static exr_result_t exr_write_image(exr_context_t ctx, const rp_image *img, int 
             if ((rv = exr_encoding_choose_default_routines(ctx, part, &enc)) != EXR_ERR_SUCCESS)
                 break;
             initialised = 1;
+            if (enc.compress_fn) {
+                guard.compress = enc.compress_fn;
+                enc.encoding_user_data = &guard;
+                enc.compress_fn = exr_compress_guarded;
+            }
         }
         *what = "encode chunk";
         if ((rv = exr_encoding_run(ctx, part, &enc)) != EXR_ERR_SUCCESS)
@@ -295,63 +324,110 @@ rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *er
     return rp_temp_commit(fd, tmp, path, err);
 }
 
-/* Decodes every channel of part 0 into the planes (width * height floats
- * each, in the order of chlist). */
-static exr_result_t exr_read_pixels(exr_context_t ctx, const exr_attr_box2i_t *dw,
-                                    const exr_attr_chlist_t *chlist, float **planes,
-                                    const char **what)
+/* Decodes one chunk (a block of scanlines or a tile) into the planes
+ * (width x height floats each, in the order of chlist): the chunk's first
+ * pixel goes to (x0, y0) of the image, its rows width floats apart. */
+static exr_result_t exr_decode_chunk(exr_context_t ctx, const exr_chunk_info_t *cinfo,
+                                     exr_decode_pipeline_t *dec, int *initialised,
+                                     const exr_attr_chlist_t *chlist, float **planes, size_t width,
+                                     size_t height, size_t x0, size_t y0, const char **what)
 {
     exr_result_t rv;
-    int32_t lines_per_chunk = 0;
-    *what = "query scanlines per chunk";
-    if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines_per_chunk)) != EXR_ERR_SUCCESS)
-        return rv;
-    if (lines_per_chunk <= 0)
+    if (cinfo->width < 0 || cinfo->height < 0 || x0 + (size_t)cinfo->width > width ||
+        y0 + (size_t)cinfo->height > height) {
+        *what = "place chunk";
         return EXR_ERR_CORRUPT_CHUNK;
+    }
+    rv = *initialised ? exr_decoding_update(ctx, 0, cinfo, dec)
+                      : exr_decoding_initialize(ctx, 0, cinfo, dec);
+    if (rv != EXR_ERR_SUCCESS)
+        return rv;
+    /* Pointers and strides are set for every chunk: edge chunks (the last
+     * scanline block, the right and bottom tiles) are smaller. */
+    for (int16_t c = 0; c < dec->channel_count; c++) {
+        exr_coding_channel_info_t *ch = &dec->channels[c];
+        long k = -1;
+        for (int j = 0; j < chlist->num_channels; j++)
+            if (strcmp(chlist->entries[j].name.str, ch->channel_name) == 0)
+                k = j;
+        if (k < 0) {
+            *what = "match channel";
+            return EXR_ERR_CORRUPT_CHUNK;
+        }
+        /* Whatever the stored type (half, float, uint), ask for float. */
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+        ch->user_bytes_per_element = (int16_t)sizeof(float);
+        ch->user_pixel_stride = (int32_t)sizeof(float);
+        ch->user_line_stride = (int32_t)(width * sizeof(float));
+        ch->decode_to_ptr = (uint8_t *)(planes[k] + y0 * width + x0);
+    }
+    if (!*initialised) {
+        *what = "choose decoder";
+        if ((rv = exr_decoding_choose_default_routines(ctx, 0, dec)) != EXR_ERR_SUCCESS)
+            return rv;
+        *initialised = 1;
+    }
+    *what = "decode chunk";
+    return exr_decoding_run(ctx, 0, dec);
+}
 
+/* Decodes every channel of part 0 into the planes (width * height floats
+ * each, in the order of chlist).  A scanline part is read block by block;
+ * a tiled part tile by tile at level (0, 0), which in every level mode
+ * (one level, mipmap, ripmap) is the full-resolution image the data
+ * window describes (OpenEXR file layout, "Tiles"); tile (tx, ty) holds the
+ * pixels from (tx * tile width, ty * tile height) of the data window, and
+ * the right and bottom tiles are cut at its edge. */
+static exr_result_t exr_read_pixels(exr_context_t ctx, exr_storage_t storage,
+                                    const exr_attr_box2i_t *dw, const exr_attr_chlist_t *chlist,
+                                    float **planes, const char **what)
+{
+    exr_result_t rv = EXR_ERR_SUCCESS;
     size_t width = (size_t)((int64_t)dw->max.x - dw->min.x + 1);
+    size_t height = (size_t)((int64_t)dw->max.y - dw->min.y + 1);
     exr_decode_pipeline_t dec;
     memset(&dec, 0, sizeof dec);
     int initialised = 0;
-    for (int64_t y = dw->min.y; y <= dw->max.y; y += lines_per_chunk) {
-        exr_chunk_info_t cinfo;
-        *what = "read chunk";
-        if ((rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo)) != EXR_ERR_SUCCESS)
-            break;
-        rv = initialised ? exr_decoding_update(ctx, 0, &cinfo, &dec)
-                         : exr_decoding_initialize(ctx, 0, &cinfo, &dec);
-        if (rv != EXR_ERR_SUCCESS)
-            break;
-        for (int16_t c = 0; c < dec.channel_count; c++) {
-            exr_coding_channel_info_t *ch = &dec.channels[c];
-            long k = -1;
-            for (int j = 0; j < chlist->num_channels; j++)
-                if (strcmp(chlist->entries[j].name.str, ch->channel_name) == 0)
-                    k = j;
-            if (k < 0) {
-                *what = "match channel";
+    exr_chunk_info_t cinfo;
+    if (storage == EXR_STORAGE_SCANLINE) {
+        int32_t lines_per_chunk = 0;
+        *what = "query scanlines per chunk";
+        if ((rv = exr_get_scanlines_per_chunk(ctx, 0, &lines_per_chunk)) != EXR_ERR_SUCCESS)
+            return rv;
+        if (lines_per_chunk <= 0)
+            return EXR_ERR_CORRUPT_CHUNK;
+        for (int64_t y = dw->min.y; y <= dw->max.y && rv == EXR_ERR_SUCCESS; y += lines_per_chunk) {
+            *what = "read chunk";
+            if ((rv = exr_read_scanline_chunk_info(ctx, 0, (int)y, &cinfo)) != EXR_ERR_SUCCESS)
+                break;
+            if (cinfo.start_y < dw->min.y) {
+                *what = "place chunk";
                 rv = EXR_ERR_CORRUPT_CHUNK;
                 break;
             }
-            /* Whatever the stored type (half, float, uint), ask for float. */
-            ch->user_data_type = EXR_PIXEL_FLOAT;
-            ch->user_bytes_per_element = (int16_t)sizeof(float);
-            ch->user_pixel_stride = (int32_t)sizeof(float);
-            ch->user_line_stride = (int32_t)(width * sizeof(float));
-            ch->decode_to_ptr =
-                (uint8_t *)(planes[k] + (size_t)((int64_t)cinfo.start_y - dw->min.y) * width);
+            rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, chlist, planes, width, height, 0,
+                                  (size_t)((int64_t)cinfo.start_y - dw->min.y), what);
         }
-        if (rv != EXR_ERR_SUCCESS)
-            break;
-        if (!initialised) {
-            *what = "choose decoder";
-            if ((rv = exr_decoding_choose_default_routines(ctx, 0, &dec)) != EXR_ERR_SUCCESS)
-                break;
-            initialised = 1;
+    } else {
+        int32_t tw = 0, th = 0, lw = 0, lh = 0;
+        *what = "query tile size";
+        if ((rv = exr_get_tile_sizes(ctx, 0, 0, 0, &tw, &th)) != EXR_ERR_SUCCESS)
+            return rv;
+        *what = "query level size";
+        if ((rv = exr_get_level_sizes(ctx, 0, 0, 0, &lw, &lh)) != EXR_ERR_SUCCESS)
+            return rv;
+        if (tw <= 0 || th <= 0 || (size_t)lw != width || (size_t)lh != height) {
+            *what = "check tile layout";
+            return EXR_ERR_CORRUPT_CHUNK;
         }
-        *what = "decode chunk";
-        if ((rv = exr_decoding_run(ctx, 0, &dec)) != EXR_ERR_SUCCESS)
-            break;
+        for (int32_t ty = 0; (int64_t)ty * th < lh && rv == EXR_ERR_SUCCESS; ty++)
+            for (int32_t tx = 0; (int64_t)tx * tw < lw && rv == EXR_ERR_SUCCESS; tx++) {
+                *what = "read tile";
+                if ((rv = exr_read_tile_chunk_info(ctx, 0, tx, ty, 0, 0, &cinfo)) != EXR_ERR_SUCCESS)
+                    break;
+                rv = exr_decode_chunk(ctx, &cinfo, &dec, &initialised, chlist, planes, width, height,
+                                      (size_t)tx * (size_t)tw, (size_t)ty * (size_t)th, what);
+            }
     }
     if (initialised || dec.channels)
         exr_decoding_destroy(ctx, &dec);
@@ -400,10 +476,10 @@ rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
     what = "query storage";
     if ((rv = exr_get_storage(ctx, 0, &storage)) != EXR_ERR_SUCCESS)
         goto exr_failed;
-    if (storage != EXR_STORAGE_SCANLINE) {
+    if (storage != EXR_STORAGE_SCANLINE && storage != EXR_STORAGE_TILED) {
         st = rp_error_set(err, RP_ERR_UNSUPPORTED,
-                          "%s: only scanline EXR images are supported (this one is tiled or deep)",
-                          path);
+                          "%s: a deep EXR image (several samples per pixel); radpt reads flat scanline "
+                          "and tiled images", path);
         goto done;
     }
     exr_attr_box2i_t dw;
@@ -451,7 +527,7 @@ rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
         memcpy(nm[c], s->str, (size_t)s->length);
         nm[c][s->length] = '\0';
     }
-    if ((rv = exr_read_pixels(ctx, &dw, chlist, pl, &what)) != EXR_ERR_SUCCESS)
+    if ((rv = exr_read_pixels(ctx, storage, &dw, chlist, pl, &what)) != EXR_ERR_SUCCESS)
         goto exr_failed;
 
     *width = (uint32_t)w;
@@ -680,6 +756,125 @@ static int png_encode(png_structp png, png_infop info, FILE *fp, uint32_t width,
     }
     png_write_end(png, info);
     return 0;
+}
+
+/* ---------------------------------------------------------------------
+ * PNG input */
+
+/* What one read allocates, kept outside png_decode's frame so that a
+ * longjmp out of libpng leaves it to be freed. */
+typedef struct png_in {
+    png_bytep data;  /* the rows as libpng delivers them */
+    png_bytepp rows;
+    uint16_t *samples;
+    uint32_t width, height;
+    size_t channels;
+} png_in;
+
+/* Everything that touches libpng after setjmp (see png_encode).  The
+ * signature's 8 bytes are already read.  Grey below 8 bits is widened
+ * (png_set_expand_gray_1_2_4_to_8: 0 stays 0), a palette index is looked
+ * up in PLTE; no tRNS expansion, no gamma or 16-to-8 reduction, so every
+ * sample keeps its stored value (8 or 16 bits; 16-bit rows are
+ * big-endian, PNG spec 7.1). */
+static int png_decode(png_structp png, png_infop info, FILE *fp, png_in *in)
+{
+    if (setjmp(png_jmpbuf(png)))
+        return -1;
+    png_init_io(png, fp);
+    png_set_sig_bytes(png, 8);
+    png_read_info(png, info);
+    int type = png_get_color_type(png, info);
+    if (type == PNG_COLOR_TYPE_PALETTE)
+        png_set_packing(png); /* one index per byte */
+    else if (png_get_bit_depth(png, info) < 8)
+        png_set_expand_gray_1_2_4_to_8(png);
+    png_set_interlace_handling(png);
+    png_read_update_info(png, info);
+    png_uint_32 w = png_get_image_width(png, info), h = png_get_image_height(png, info);
+    size_t rowbytes = png_get_rowbytes(png, info), nch = png_get_channels(png, info);
+    int wide = png_get_bit_depth(png, info) == 16;
+    png_colorp palette = NULL;
+    int npalette = 0;
+    if (type == PNG_COLOR_TYPE_PALETTE && !png_get_PLTE(png, info, &palette, &npalette))
+        png_error(png, "palette image without a PLTE chunk");
+    size_t outch = type == PNG_COLOR_TYPE_PALETTE ? 3 : nch;
+    if (w == 0 || h == 0 || rowbytes > SIZE_MAX / h || (size_t)w * h > SIZE_MAX / sizeof(uint16_t) / outch)
+        png_error(png, "image too large");
+    if (!(in->data = malloc(rowbytes * h)) || !(in->rows = malloc(h * sizeof *in->rows)) ||
+        !(in->samples = malloc((size_t)w * h * outch * sizeof *in->samples)))
+        png_error(png, "out of memory");
+    for (png_uint_32 y = 0; y < h; y++)
+        in->rows[y] = in->data + (size_t)y * rowbytes;
+    png_read_image(png, in->rows);
+    png_read_end(png, NULL);
+    for (png_uint_32 y = 0; y < h; y++) {
+        const png_byte *row = in->rows[y];
+        uint16_t *out = in->samples + (size_t)y * w * outch;
+        for (png_uint_32 x = 0; x < w; x++) {
+            if (type == PNG_COLOR_TYPE_PALETTE) {
+                if (row[x] >= npalette)
+                    png_error(png, "palette index out of range");
+                out[3 * (size_t)x + 0] = palette[row[x]].red;
+                out[3 * (size_t)x + 1] = palette[row[x]].green;
+                out[3 * (size_t)x + 2] = palette[row[x]].blue;
+                continue;
+            }
+            for (size_t c = 0; c < nch; c++) {
+                size_t i = (size_t)x * nch + c;
+                out[i] = wide ? (uint16_t)(row[2 * i] << 8 | row[2 * i + 1]) : row[i];
+            }
+        }
+    }
+    in->width = w;
+    in->height = h;
+    in->channels = outch;
+    return 0;
+}
+
+rp_status rp_image_read_png(const char *path, uint32_t *width, uint32_t *height, size_t *channels,
+                            uint16_t **samples, rp_error *err)
+{
+    *width = *height = 0;
+    *channels = 0;
+    *samples = NULL;
+    FILE *fp = fopen(path, "rb");
+    if (!fp)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: cannot open: %s", path, strerror(errno));
+    png_byte sig[8];
+    size_t got = fread(sig, 1, sizeof sig, fp);
+    if (got != sizeof sig && ferror(fp)) {
+        int e = errno;
+        fclose(fp);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: cannot read: %s", path, strerror(e));
+    }
+    if (got != sizeof sig || png_sig_cmp(sig, 0, sizeof sig) != 0) {
+        fclose(fp);
+        return rp_error_set(err, RP_ERR_INPUT, "%s: not a PNG file (no PNG signature)", path);
+    }
+    png_capture cap = {{0}};
+    png_in in = {0};
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &cap, png_capture_error, png_ignore_warning);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    int rc = -1;
+    if (png && info)
+        rc = png_decode(png, info, fp, &in);
+    else
+        snprintf(cap.message, sizeof cap.message, "cannot create libpng structures");
+    png_destroy_read_struct(png ? &png : NULL, info ? &info : NULL, NULL);
+    fclose(fp);
+    free(in.data);
+    free(in.rows);
+    if (rc != 0) {
+        free(in.samples);
+        return rp_error_set(err, strcmp(cap.message, "out of memory") ? RP_ERR_INPUT : RP_ERR_NOMEM,
+                            "%s: cannot read PNG: %s", path, cap.message);
+    }
+    *width = in.width;
+    *height = in.height;
+    *channels = in.channels;
+    *samples = in.samples;
+    return RP_OK;
 }
 
 /* ---------------------------------------------------------------------

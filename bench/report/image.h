@@ -1,5 +1,6 @@
 /* Image files: OpenEXR through the OpenEXRCore C API (the only module that
- * calls exr_*), and a tone-mapped sRGB PNG preview through libpng.  Writes
+ * calls exr_*), a tone-mapped sRGB PNG preview and PNG input (masks)
+ * through libpng.  Writes
  * are atomic: a temporary name in the same directory, then rename(2), so a
  * failed run leaves no partial file. */
 #ifndef RP_IMAGE_H
@@ -30,8 +31,13 @@ typedef struct rp_image {
  * string metadata. */
 rp_status rp_image_write_exr(const char *path, const rp_image *img, rp_error *err);
 
-/* Reads an EXR written by rp_image_write_exr back (all channels as float).
- * The caller frees *planes[i], *planes, *names[i] and *names with free(). */
+/* Reads part 0 of an EXR (rp_image_write_exr's, or another program's):
+ * every channel as float (half, float or uint stored, any compression
+ * OpenEXRCore decodes), the data window's pixels; scanline or tiled
+ * storage, a tiled image read at level 0 (mipmaps and ripmaps: the full
+ * resolution).  Deep and subsampled images are refused (RP_ERR_UNSUPPORTED);
+ * a missing or non-EXR file is RP_ERR_INPUT.  The caller frees
+ * *planes[i], *planes, *names[i] and *names with free(). */
 rp_status rp_image_read_exr(const char *path, uint32_t *width, uint32_t *height,
                             size_t *nchannels, char ***names, float ***planes,
                             rp_error *err);
@@ -83,6 +89,17 @@ void rp_exposure_describe(const rp_exposure *e, char *buf, size_t n);
 rp_status rp_image_write_png(const char *path, uint32_t width, uint32_t height,
                              const float *r, const float *g, const float *b,
                              const rp_exposure *exposure, rp_error *err);
+
+/* Reads a PNG's samples as stored (libpng): grey, grey + alpha, RGB or
+ * RGBA at 8 or 16 bits, interlaced or not; grey at 1, 2 or 4 bits is
+ * widened to 8 (0 stays 0); a palette image gives its colours' R, G, B.
+ * Transparency from a tRNS chunk is not a channel and is ignored; no gamma
+ * is applied.  *channels gets 1 to 4, *samples width * height * channels
+ * values (channel fastest, rows from the top), 0..255 or 0..65535.  A
+ * missing, unreadable, non-PNG or corrupt file is RP_ERR_INPUT with the
+ * file named.  The caller frees *samples. */
+rp_status rp_image_read_png(const char *path, uint32_t *width, uint32_t *height, size_t *channels,
+                            uint16_t **samples, rp_error *err);
 
 /* Portable Float Map (Debevec's PFM): "PF", width height, scale -1.0
  * (little-endian floats), rows from the bottom up; linear radiance as
