@@ -2,8 +2,8 @@
  * placed in one, rendered and probed by the path tracer and by every
  * radiosity method that applies; per-surface agreement, time and memory.
  *
- * The path-traced reference (rp_reference_get: Sobol' samples, its own
- * standard errors) is the yardstick, as the issue that asked for this
+ * The path-traced reference (rp_reference_get: independent samples, its
+ * own standard errors) is the yardstick, as the issue that asked for this
  * experiment judges: hierarchical radiosity within 3% and Gauss-Seidel
  * within 5% on every surface holding 2% or more of the scene's area.
  * Surfaces are compared on the mean over bands of their area-averaged

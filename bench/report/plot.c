@@ -41,14 +41,16 @@ const char *const rp_runs_csv_columns =
     "peak_rss_mb: peak resident memory of the process during this run, MiB\n"
     "solver_mb: memory the solver reports holding, MiB\n"
     "rmse: image RMSE against the reference over measured pixels and bands, W sr^-1 m^-2\n"
-    "rmse_debiased: sqrt(rmse^2 - ref_rmse_se^2), the reference's estimated variance removed; with a "
-    "Sobol' reference (whose variance estimate is pessimistic) the RMSE against the truth lies between "
-    "rmse_debiased and rmse; empty where rmse <= ref_rmse_se (not resolved by the reference)\n"
+    "rmse_debiased: sqrt of the mean over measured values of (x - r)^2 - var(r), the reference's estimated "
+    "variance removed: the reference uses independent random numbers, so that variance estimate is unbiased "
+    "and so is the debiased MSE against the truth; empty where it is not positive (not resolved)\n"
     "relmse: relative MSE, mean of (x - r)^2 / (r^2 + 0.01)\n"
     "mae: mean absolute error over measured pixels and bands, W sr^-1 m^-2\n"
     "surface_err: RMS over measured surfaces and bands of the relative error of the area-averaged radiance\n"
     "ref_rmse_se: the reference's own RMSE standard error\n"
-    "ref_flag: 1 when the reference's error is not well below this one (stderr > 1/3 of it)\n"
+    "ref_flag: 1 when the reference does not resolve this error: the debiased MSE of the image (or of the "
+    "surfaces' relative errors) is not positive or its standard error exceeds 20% of it (the debiased RMSE "
+    "then known to worse than 10%)\n"
     "converged: the method's own stopping rule was met\n"
     "final: 1 on the last row of a run (its state at the end of the budget)\n"
     "measure_s: seconds the estimate and metrics took (not counted as solver time)\n";
@@ -691,7 +693,8 @@ static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench
                    "emission, so L = Le / (1 - rho) = %.6g everywhere (band 0). File `%s`%s.\n",
                 r->exact_L[0], r->exr_path, r->cached ? " (cached)" : "");
     else
-        fprintf(f, "Path traced: pathtrace, Owen-scrambled Sobol', %lu samples per pixel, %lu probe points per "
+        fprintf(f, "Path traced: pathtrace, independent random numbers (so its variance estimate is unbiased), %lu "
+                   "samples per pixel, %lu probe points per "
                    "surface, seed %llu (no benchmark run uses it), made in %.1f s; file `%s`%s. Its own RMSE "
                    "standard error is %.3g W sr^-1 m^-2 and its surface averages' RMS relative standard error %.3g.\n",
                 r->spp, r->samples, (unsigned long long)r->seed, r->seconds, r->exr_path,
@@ -705,11 +708,15 @@ static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench
             if (!flagged)
                 fputc('\n', f);
             flagged = 1;
-            fprintf(f, "**Warning:** the reference is not accurate enough for `%s`: its standard error exceeds a "
-                       "third of the error measured at the end (RMSE %.4g vs reference %.3g; surface error %.4g vs "
-                       "%.3g). Make a longer reference (`radpt reference SCENE --spp N`).\n\n",
-                    b->methods[mi].text, b->summary[mi].final.rmse, r->rmse_se, b->summary[mi].final.surface_err,
-                    r->surface_rel_se);
+            char deb[32] = "not positive";
+            if (isfinite(b->summary[mi].final.rmse_debiased))
+                snprintf(deb, sizeof deb, "%.4g", b->summary[mi].final.rmse_debiased);
+            fprintf(f, "**Warning:** the reference does not resolve the error of `%s` at the end: the error with "
+                       "the reference's noise removed is not positive or known to worse than 10%% (RMSE %.4g, "
+                       "debiased %s, reference standard error %.3g; surface error %.4g, reference %.3g). Make a "
+                       "longer reference (`radpt bench ... --reference-spp N`).\n\n",
+                    b->methods[mi].text, b->summary[mi].final.rmse, deb, r->rmse_se,
+                    b->summary[mi].final.surface_err, r->surface_rel_se);
         }
     if (b->failures) {
         fputc('\n', f);
@@ -760,11 +767,12 @@ static rp_status write_report(const rp_bench *b, const char *dir, const rp_bench
     if (charts)
         fprintf(f, "![Image RMSE against solver time](error_time.png)\n\n");
     fprintf(f, "Log-log chart of image RMSE against solver wall time, all methods; error bars: one standard "
-               "deviation over seeds; dashed: the reference's own RMSE standard error, the floor below which "
-               "errors cannot be resolved. Deterministic radiosity curves flatten at their discretisation error. "
+               "deviation over seeds; dashed: the reference's own RMSE standard error, the floor the plotted RMSE "
+               "cannot fall below. Deterministic radiosity curves flatten at their discretisation error. "
                "(The reference is independent of every run, so the RMSE against it exceeds the RMSE against the "
-               "truth by at most its own error; `RMSE debiased` subtracts its estimated variance, which for a "
-               "Sobol' reference is pessimistic: the truth lies between the two columns.)\n\n"
+               "truth by at most its own error; `RMSE debiased` subtracts its estimated variance, which is "
+               "unbiased for the reference's independent random numbers, and estimates the RMSE against the truth "
+               "even below the dashed line.)\n\n"
                "Fitted slopes of log RMSE against log time, log work (rays + form factors) and log samples, over "
                "every row of every seed (least squares, GSL `gsl_fit_linear`; 95%% interval from Student's t with "
                "n - 2 degrees of freedom). Monte Carlo error falls as N^-1/2: slope -0.5.\n\n"

@@ -209,17 +209,23 @@ static rp_status measure(run_ctx *c, rp_checkpoint *cp, rp_error *err)
         cp->rmse = im.rmse;
         cp->relmse = im.relmse;
         cp->mae = im.mae;
-        double d = im.rmse * im.rmse - r->rmse_se * r->rmse_se;
-        /* below the reference's own error the difference is not resolved:
-         * no value (an empty field, "n/a"), not a misleading 0 */
-        cp->rmse_debiased = isfinite(r->rmse_se) && d > 0 ? sqrt(d) : NAN;
+        /* below the reference's own noise the error is not resolved: no
+         * value (an empty field, "n/a"), not a misleading 0 */
+        rp_debiased_mse dm;
+        rp_metrics_debiased_image(c->image, r->radiance, r->variance, r->mask, c->npix, c->nb, &dm);
+        cp->rmse_debiased = isfinite(dm.mse) && dm.mse > 0 ? sqrt(dm.mse) : NAN;
+        cp->ref_flag = dm.count && !rp_metrics_resolved(&dm);
     }
-    if (e.surface_radiance)
+    if (e.surface_radiance) {
         cp->surface_err = rp_metrics_surface_error(c->surf, r->surface_radiance, r->surface_mask, c->ns, c->nb, NULL);
-    /* The reference's own error should be well below the error measured:
-     * flag it when its standard error exceeds a third of it. */
-    cp->ref_flag = (isfinite(cp->rmse) && r->rmse_se > cp->rmse / 3) ||
-                   (isfinite(cp->surface_err) && r->surface_rel_se > cp->surface_err / 3);
+        rp_debiased_mse ds;
+        rp_metrics_debiased_surfaces(c->surf, r->surface_radiance, r->surface_stderr, r->surface_mask, c->ns, c->nb,
+                                     &ds);
+        if (ds.count && !rp_metrics_resolved(&ds))
+            cp->ref_flag = 1;
+    }
+    /* ref_flag: the reference does not resolve the error measured
+     * (metrics.h: the debiased MSE and its standard error). */
     cp->measure_s = rp_clock() - t0;
     return RP_OK;
 }

@@ -67,18 +67,16 @@ typedef struct rp_checkpoint {
     double residual, unshot;
     double peak_rss_mb, solver_mb;
     double rmse, relmse, mae, surface_err;
-    /* sqrt(rmse^2 - reference RMSE standard error^2), NaN (not resolved)
-     * where that is not positive.  The
-     * reference r is independent of the run, so E[(x - r)^2] =
-     * E[(x - L)^2] + E[(r - L)^2] against the truth L: rmse overestimates
-     * the error against L by the reference's own error, and subtracting the
-     * reference's estimated variance removes it.  That estimate (sample
-     * variance / N) is exact for independent samples and an overestimate
-     * for scrambled Sobol' points, so for a Sobol' reference the error
-     * against the truth lies between rmse_debiased and rmse. */
+    /* sqrt of the debiased MSE (metrics.h, rp_metrics_debiased_image),
+     * NaN (not resolved) where that is not positive.  The reference r is
+     * independent of the run, so E[(x - r)^2] = E[(x - L)^2] + E[(r - L)^2]
+     * against the truth L: rmse overestimates the error against L by the
+     * reference's own error, and subtracting the reference's estimated
+     * variance (unbiased: its samples are independent, reference.h)
+     * removes it. */
     double rmse_debiased;
     double measure_s;     /* time the estimate and metrics took (not counted) */
-    int ref_flag;         /* the reference's own error is not well below this one */
+    int ref_flag;         /* the reference does not resolve this error (rp_metrics_resolved) */
     int converged, final;
 } rp_checkpoint;
 

@@ -3,6 +3,7 @@
 
 #include <gsl/gsl_cdf.h>
 #include <gsl/gsl_fit.h>
+#include <gsl/gsl_rstat.h>
 #include <math.h>
 #include <stdlib.h>
 
@@ -53,6 +54,75 @@ double rp_metrics_reference_rmse_se(const float *var, const unsigned char *mask,
         }
     }
     return k ? sqrt(s / (double)k) : NAN;
+}
+
+/* Mean and standard error of the t_k (metrics.h), NaN without values. */
+static void debiased_finish(gsl_rstat_workspace *w, int noisy, rp_debiased_mse *out)
+{
+    out->count = gsl_rstat_n(w);
+    out->mse = out->count ? gsl_rstat_mean(w) : NAN;
+    out->se = !out->count ? NAN : !noisy ? 0 : out->count > 1 ? gsl_rstat_sd_mean(w) : INFINITY;
+    gsl_rstat_free(w);
+}
+
+void rp_metrics_debiased_image(const float *img, const float *ref, const float *var,
+                               const unsigned char *mask, size_t npix, size_t nb,
+                               rp_debiased_mse *out)
+{
+    gsl_rstat_workspace *w = gsl_rstat_alloc();
+    if (!w) {
+        out->mse = out->se = NAN;
+        out->count = 0;
+        return;
+    }
+    int noisy = 0;
+    for (size_t i = 0; i < npix; i++) {
+        if (mask && !mask[i])
+            continue;
+        for (size_t b = 0; b < nb; b++) {
+            size_t k = i * nb + b;
+            double d = (double)img[k] - ref[k], v = var ? var[k] : 0;
+            noisy |= v != 0;
+            gsl_rstat_add(d * d - v, w);
+        }
+    }
+    debiased_finish(w, noisy, out);
+}
+
+void rp_metrics_debiased_surfaces(const double *x, const double *ref, const double *rse,
+                                  const unsigned char *smask, size_t ns, size_t nb,
+                                  rp_debiased_mse *out)
+{
+    double st = 0, var = 0;
+    size_t m = 0;
+    for (size_t i = 0; i < ns; i++) {
+        if (smask && !smask[i])
+            continue;
+        for (size_t b = 0; b < nb; b++) {
+            double r = ref[i * nb + b];
+            if (!(r > 0))
+                continue;
+            double e = (x[i * nb + b] - r) / r, s = rse ? rse[i * nb + b] / r : 0, v = s * s, t = e * e - v;
+            st += t;
+            /* Var(t) for r's error normal with variance v around a fixed
+             * error: 4 e^2 v + 2 v^2, with e^2 estimated by max(t, 0) */
+            var += 4 * (t > 0 ? t : 0) * v + 2 * v * v;
+            m++;
+        }
+    }
+    out->count = m;
+    out->mse = m ? st / (double)m : NAN;
+    out->se = m ? sqrt(var) / (double)m : NAN;
+}
+
+int rp_metrics_resolved(const rp_debiased_mse *d)
+{
+    if (!d->count || !isfinite(d->mse) || !isfinite(d->se))
+        return 0;
+    /* an exact reference resolves every error, 0 included */
+    if (d->se == 0)
+        return d->mse >= 0;
+    return d->mse > 0 && d->se <= 2 * RP_RESOLVED_REL_SE * d->mse;
 }
 
 double rp_metrics_surface_error(const double *x, const double *ref, const unsigned char *smask,

@@ -44,6 +44,50 @@ void rp_metrics_image(const float *img, const float *ref, const unsigned char *m
 double rp_metrics_reference_rmse_se(const float *var, const unsigned char *mask, size_t npix,
                                     size_t nb);
 
+/* The mean squared error against the truth, estimated through a Monte
+ * Carlo reference r whose per-value variance of the mean v is estimated
+ * without bias (independent samples).  r is independent of x, so
+ *
+ *     E[(x - r)^2 - v] = (x - L)^2        against the truth L,
+ *
+ * and mse = 1/K sum t_k with t_k = (x_k - r_k)^2 - v_k is unbiased for the
+ * MSE against L (it may be negative when the reference's noise hides the
+ * error).  se is the standard error of that mean:
+ *   image:    sd(t) / sqrt(K) over 10^4 - 10^5 values (GSL's running
+ *             statistics): it covers heavy-tailed pixel noise and the noise
+ *             of the variance estimates and, pessimistically, how the error
+ *             itself varies over the values (which is fixed, not random);
+ *   surfaces: sqrt(sum 4 e_k^2 v_k + 2 v_k^2) / K, the variance of t_k when
+ *             r_k's error is normal (a surface average sums thousands of
+ *             samples) around a fixed error e_k, with e_k^2 estimated by
+ *             max(t_k, 0): tens of values are too few for an empirical
+ *             spread, which the errors' own differences would dominate.
+ * With every v = 0 (an exact reference) mse is the plain MSE and se is 0.
+ * An infinite v (a pixel of one sample) makes mse -inf: nothing is
+ * resolved. */
+typedef struct rp_debiased_mse {
+    double mse, se;
+    size_t count;  /* K; mse and se NaN when 0 */
+} rp_debiased_mse;
+
+/* Over the pixels and bands rp_metrics_image uses; var may be NULL (0). */
+void rp_metrics_debiased_image(const float *img, const float *ref, const float *var,
+                               const unsigned char *mask, size_t npix, size_t nb,
+                               rp_debiased_mse *out);
+
+/* Relative to the reference, over the values surface_err uses:
+ * t = ((x - r) / r)^2 - (se_r / r)^2; rse may be NULL (0). */
+void rp_metrics_debiased_surfaces(const double *x, const double *ref, const double *rse,
+                                  const unsigned char *smask, size_t ns, size_t nb,
+                                  rp_debiased_mse *out);
+
+/* A reference resolves an error when the debiased RMSE is known to 10%:
+ * its standard error, se / (2 mse) to first order, is at most
+ * RP_RESOLVED_REL_SE of it; an exact reference (se = 0) resolves any
+ * error.  1 resolved, 0 not (mse <= 0 or too uncertain, or no values). */
+#define RP_RESOLVED_REL_SE 0.1
+int rp_metrics_resolved(const rp_debiased_mse *d);
+
 /* surface_err as above; x and ref are ns * nb; smask (ns, may be NULL)
  * selects surfaces.  *count (may be NULL) gets M.  NaN when M = 0. */
 double rp_metrics_surface_error(const double *x, const double *ref, const unsigned char *smask,
