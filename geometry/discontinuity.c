@@ -202,7 +202,8 @@ static int find_d0(const rp_scene *scene, const frame2 *frames, double tol, seg_
 /* ---- D1 ------------------------------------------------------------- */
 
 typedef struct edge_info {
-    uint32_t a, b;     /* scene vertex indices, a < b */
+    uint32_t a, b;     /* welded vertices (scene vertex indices of their
+                          representatives), a < b */
     uint32_t f0, f1;   /* the faces using it (f1 RP_NONE: a boundary edge) */
 } edge_info;
 
@@ -249,7 +250,30 @@ typedef struct wedge {
     rp_vec3 s0, s1, e0, e1;
     rp_vec3 nl;          /* the light's front normal */
     uint32_t light;
+    /* VE: the front normals of the faces around the vertex, when it is a
+     * corner of a closed fan (3 or more faces). */
+    const rp_vec3 *vn;
+    size_t nvn;
 } wedge;
+
+/* VE: the line from light point q through vertex e grazes the solid at e
+ * (Heckbert 1992, sec. 4: only such lines bound a shadow).  Around a
+ * convex corner the solid is the cone n_f . d <= 0 over the faces f at the
+ * vertex; the line enters it after e when d = e - q points into the cone,
+ * or leaves it there when -d does. */
+static int grazes(const wedge *w, rp_vec3 q, rp_vec3 e)
+{
+    if (w->nvn < 3)
+        return 1; /* an open corner (a sheet): lines through it only touch it */
+    rp_vec3 d = rp_v3_normalize(rp_v3_sub(e, q));
+    int into = 1, outof = 1;
+    for (size_t k = 0; k < w->nvn; k++) {
+        double c = rp_v3_dot(w->vn[k], d);
+        into &= c < -1e-9;
+        outof &= c > 1e-9;
+    }
+    return !into && !outof;
+}
 
 /* The segment from o to x is unblocked (ends excluded by eta). */
 static int clear(const rp_raycast *rc, rp_vec3 from, rp_vec3 to, double eta)
@@ -277,6 +301,8 @@ static int wedge_visible(const rp_raycast *rc, const wedge *w, rp_vec3 x, rp_vec
     }
     if (!(rp_v3_dot(w->nl, rp_v3_sub(e, q)) > 0) || !(rp_v3_dot(nr, rp_v3_sub(q, x)) > 0))
         return 0;
+    if (!w->ev && !grazes(w, q, e))
+        return 0;
     return clear(rc, e, x, eta) && clear(rc, e, q, eta);
 }
 
@@ -288,6 +314,7 @@ static int trace_wedge(const rp_scene *scene, const rp_raycast *rc, const frame2
 {
     /* Endpoints of the trace: image of each end of the moving segment. */
     rp_vec3 img[2];
+    int on[2];
     for (int k = 0; k < 2; k++) {
         rp_vec3 src = w->ev ? w->s0 : (k ? w->s1 : w->s0);
         rp_vec3 thr = w->ev ? (k ? w->e1 : w->e0) : w->e0;
@@ -295,11 +322,14 @@ static int trace_wedge(const rp_scene *scene, const rp_raycast *rc, const frame2
         double dp = rp_v3_dot(fr->n, rp_v3_sub(thr, fr->o));
         if (!(ds > tol) || dp < -tol || !(dp < ds))
             return 0;
+        on[k] = dp <= tol;
         double t = ds / (ds - dp);
         if (!(t <= DISC_MAX_T))
             return 0;
         img[k] = rp_v3_add(src, rp_v3_scale(rp_v3_sub(thr, src), t));
     }
+    if (on[0] && on[1])
+        return 0; /* an edge lying on the receiver: D0, not a shadow */
     rp_vec3 a, b;
     if (!clip_to_face(fr, img[0], img[1], tol, &a, &b))
         return 0;
@@ -325,6 +355,39 @@ static int trace_wedge(const rp_scene *scene, const rp_raycast *rc, const frame2
     return 0;
 }
 
+/* Union-find over vertices; the smaller index is the root. */
+static uint32_t weld_find(uint32_t *parent, uint32_t x)
+{
+    while (parent[x] != x) {
+        parent[x] = parent[parent[x]];
+        x = parent[x];
+    }
+    return x;
+}
+
+static void weld_union(uint32_t *parent, uint32_t a, uint32_t b)
+{
+    a = weld_find(parent, a);
+    b = weld_find(parent, b);
+    if (a < b)
+        parent[b] = a;
+    else if (b < a)
+        parent[a] = b;
+}
+
+typedef struct xkey {
+    double x;
+    uint32_t i;
+} xkey;
+
+static int by_x(const void *pa, const void *pb)
+{
+    const xkey *a = pa, *b = pb;
+    if (a->x != b->x)
+        return a->x < b->x ? -1 : 1;
+    return a->i < b->i ? -1 : (a->i > b->i);
+}
+
 static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, double eta, seg_list *out,
                    rp_error *err)
 {
@@ -336,6 +399,10 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
     key_rec *keys = malloc((4 * nf + 1) * sizeof *keys);
     edge_info *edges = malloc((4 * nf + 1) * sizeof *edges);
     unsigned char *cand = NULL;
+    uint32_t *wid = NULL;
+    xkey *order = NULL;
+    size_t *vstart = NULL;
+    rp_vec3 *vnorm = NULL;
     unsigned char *recv = calloc(nf + 1, 1);
     if (!keys || !edges || !recv)
         goto done;
@@ -346,10 +413,41 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
         for (size_t k = 0; k < nb; k++)
             recv[f] |= m->rho[k] > 0;
     }
+    /* Weld vertices closer than tol, across surfaces (the Cornell box's
+     * blocks are five quads each, with their own vertices): edges and
+     * corners are found by position. */
+    const size_t nvs = rp_scene_nvertices(scene);
+    wid = malloc((nvs + 1) * sizeof *wid);
+    order = malloc((nvs + 1) * sizeof *order);
+    vstart = calloc(nvs + 2, sizeof *vstart);
+    vnorm = malloc((4 * nf + 1) * sizeof *vnorm);
+    if (!wid || !order || !vstart || !vnorm)
+        goto done;
+    for (size_t i = 0; i < nvs; i++) {
+        wid[i] = (uint32_t)i;
+        order[i] = (xkey){V[i].x, (uint32_t)i};
+    }
+    qsort(order, nvs, sizeof *order, by_x);
+    for (size_t i = 0; i < nvs; i++)
+        for (size_t j = i + 1; j < nvs && order[j].x - order[i].x <= tol; j++)
+            if (rp_v3_length(rp_v3_sub(V[order[i].i], V[order[j].i])) <= tol)
+                weld_union(wid, order[i].i, order[j].i);
+    for (size_t i = 0; i < nvs; i++)
+        wid[i] = weld_find(wid, (uint32_t)i);
+    /* The front normals of the faces around each welded vertex. */
+    for (size_t f = 0; f < nf; f++)
+        for (uint32_t i = 0; i < F[f].nverts; i++)
+            vstart[wid[F[f].v[i]] + 2]++;
+    for (size_t i = 0; i < nvs; i++)
+        vstart[i + 2] += vstart[i + 1];
+    for (size_t f = 0; f < nf; f++)
+        for (uint32_t i = 0; i < F[f].nverts; i++)
+            vnorm[vstart[wid[F[f].v[i]] + 1]++] = F[f].normal;
+
     size_t nk = 0;
     for (size_t f = 0; f < nf; f++)
         for (uint32_t i = 0; i < F[f].nverts; i++) {
-            uint32_t a = F[f].v[i], b = F[f].v[(i + 1) % F[f].nverts];
+            uint32_t a = wid[F[f].v[i]], b = wid[F[f].v[(i + 1) % F[f].nverts]];
             keys[nk].key = a < b ? ((uint64_t)a << 32) | b : ((uint64_t)b << 32) | a;
             keys[nk].face = (uint32_t)f;
             nk++;
@@ -365,9 +463,7 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
         edges[ne].f0 = keys[i].face;
         /* Exactly two faces: a manifold edge; more (a seam), or one: a
          * boundary edge for the silhouette test. */
-        edges[ne].f1 = (j - i == 2 && F[keys[i + 1].face].surface == F[keys[i].face].surface)
-                           ? keys[i + 1].face
-                           : RP_NONE;
+        edges[ne].f1 = j - i == 2 ? keys[i + 1].face : RP_NONE;
         ne++;
         i = j;
     }
@@ -400,7 +496,7 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
                 if (!silhouette(scene, E, v))
                     continue;
                 cand[E->a] = cand[E->b] = 1;
-                wedge w = {1, v, v, p0, p1, ln, (uint32_t)l};
+                wedge w = {1, v, v, p0, p1, ln, (uint32_t)l, NULL, 0};
                 for (size_t r = 0; r < nf; r++) {
                     if (!recv[r] || r == l || r == E->f0 || r == E->f1)
                         continue;
@@ -418,7 +514,7 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
                 if (!cand[pv])
                     continue;
                 rp_vec3 p = V[pv];
-                wedge w = {0, q0, q1, p, p, ln, (uint32_t)l};
+                wedge w = {0, q0, q1, p, p, ln, (uint32_t)l, vnorm + vstart[pv], vstart[pv + 1] - vstart[pv]};
                 for (size_t r = 0; r < nf; r++) {
                     if (!recv[r] || r == l)
                         continue;
@@ -442,6 +538,10 @@ done:
     free(edges);
     free(cand);
     free(recv);
+    free(wid);
+    free(order);
+    free(vstart);
+    free(vnorm);
     return ret;
 }
 
@@ -469,7 +569,8 @@ static int by_face(const void *pa, const void *pb)
 }
 
 /* Within one face's run [s, s + n): merges collinear overlapping segments
- * of the same class (D0 with D0, D1 with D1); returns the new count. */
+ * (a D0 segment absorbs a D1 one, whose kind is then lost); returns the
+ * new count. */
 static size_t merge_run(rp_disc_segment *s, size_t n, double tol)
 {
     int changed = 1;
@@ -477,8 +578,6 @@ static size_t merge_run(rp_disc_segment *s, size_t n, double tol)
         changed = 0;
         for (size_t i = 0; i < n; i++)
             for (size_t j = i + 1; j < n; j++) {
-                if ((s[i].kind == RP_DISC_D0) != (s[j].kind == RP_DISC_D0))
-                    continue;
                 if (line_dist(&s[i], s[j].a) > tol || line_dist(&s[i], s[j].b) > tol)
                     continue;
                 rp_vec3 d = rp_v3_sub(s[i].b, s[i].a);
@@ -489,6 +588,8 @@ static size_t merge_run(rp_disc_segment *s, size_t n, double tol)
                 double slack = tol / sqrt(l2);
                 if (lo > 1 + slack || hi < -slack)
                     continue; /* collinear but apart */
+                if (s[j].kind == RP_DISC_D0)
+                    s[i].kind = RP_DISC_D0;
                 rp_vec3 a0 = s[i].a;
                 if (lo < 0)
                     s[i].a = rp_v3_add(a0, rp_v3_scale(d, lo));

@@ -169,6 +169,50 @@ typedef struct ctx {
     double tol;
 } ctx;
 
+/* A segment end that lies on another segment (within tol, away from its
+ * ends) splits it there: traces meeting at the image of one occluder
+ * vertex then share that point exactly, instead of CGAL constructing
+ * crossings a rounding error apart (coincident vertices, slivers).  The
+ * face's segments are the last d->nseg of c->segs[0, *ns). */
+static int split_t_junctions(ctx *c, dface *d, size_t *ns, size_t *cap)
+{
+    int changed = 1;
+    for (int round = 0; changed && round < 8; round++) {
+        changed = 0;
+        for (size_t i = d->seg0; i < *ns; i++)
+            for (int k = 0; k < 2; k++) {
+                const endpt p = k ? c->segs[i].b : c->segs[i].a;
+                for (size_t j = d->seg0; j < *ns; j++) {
+                    if (j == i)
+                        continue;
+                    fseg *g = &c->segs[j];
+                    double dx = g->b.x - g->a.x, dy = g->b.y - g->a.y, l = hypot(dx, dy);
+                    if (!(l > 2 * c->tol))
+                        continue;
+                    double t = ((p.x - g->a.x) * dx + (p.y - g->a.y) * dy) / (l * l);
+                    if (t * l <= c->tol || (1 - t) * l <= c->tol)
+                        continue;
+                    if (fabs(dx * (p.y - g->a.y) - dy * (p.x - g->a.x)) / l > c->tol)
+                        continue;
+                    if (*ns == *cap) {
+                        fseg *ng = realloc(c->segs, 2 * *cap * sizeof *ng);
+                        if (!ng)
+                            return -1;
+                        c->segs = ng;
+                        *cap *= 2;
+                        g = &c->segs[j];
+                    }
+                    fseg tail = {p, g->b};
+                    g->b = p;
+                    c->segs[(*ns)++] = tail;
+                    changed = 1;
+                }
+            }
+    }
+    d->nseg = *ns - d->seg0;
+    return 0;
+}
+
 /* One mesh for spacing h. */
 static rp_status build(const ctx *c, double h, built *out, rp_error *err)
 {
@@ -643,7 +687,8 @@ rp_status rp_mesh_build_disc(rp_mesh *mesh, const rp_scene *scene, const rp_mesh
     if ((st = rp_disc_find(scene, &dp, &ds, &nds, err)) != RP_OK)
         return st;
     c.df = calloc(nf + 1, sizeof *c.df);
-    c.segs = malloc((nds + 1) * sizeof *c.segs);
+    size_t segcap = nds + 1;
+    c.segs = malloc(segcap * sizeof *c.segs);
     c.snaps = malloc((2 * nds + 1) * sizeof *c.snaps);
     c.ue_black = calloc(w->nue + 1, 1);
     if (!c.df || !c.segs || !c.snaps || !c.ue_black) {
@@ -722,6 +767,10 @@ rp_status rp_mesh_build_disc(rp_mesh *mesh, const rp_scene *scene, const rp_mesh
             c.segs[ns++] = g;
         }
         d->nseg = ns - d->seg0;
+        if (split_t_junctions(&c, d, &ns, &segcap)) {
+            st = rp_error_set(err, RP_ERR_NOMEM, "mesh: out of memory");
+            goto done;
+        }
     }
     qsort(c.snaps, c.nsnaps, sizeof *c.snaps, snap_cmp);
 
