@@ -17,7 +17,10 @@
  * span the wedge through it, unblocked by other faces, remain (16 pieces per
  * trace; Heckbert's "visible" test, sampled rather than exact).  Collinear
  * overlapping traces are merged.  At most max_per_face D1 segments per face
- * are kept, the longest first; D0 segments are all kept.
+ * are kept, the longest first; D0 segments are all kept.  The work is
+ * bounded too: at most 4,000,000 (wedge, receiving face) pairs are traced
+ * per scene (lights in scene order, EV before VE), which a scene of a few
+ * hundred faces never reaches; past it a large scene's D1 set is partial.
  *
  * Tolerances are relative to the scene's bounding-box diagonal
  * (RP_DISC_REL_TOL), never absolute units. */
