@@ -603,6 +603,29 @@ static size_t merge_run(rp_disc_segment *s, size_t n, double tol)
     return n;
 }
 
+double rp_disc_scale(const rp_scene *scene)
+{
+    const size_t nf = rp_scene_nfaces(scene), nb = rp_scene_nbands(scene);
+    const rp_face *F = rp_scene_faces(scene);
+    const rp_vec3 *V = rp_scene_vertices(scene);
+    rp_vec3 lo = rp_v3(INFINITY, INFINITY, INFINITY), hi = rp_v3(-INFINITY, -INFINITY, -INFINITY);
+    for (size_t f = 0; f < nf; f++) {
+        const rp_material *m = rp_scene_face_material(scene, (uint32_t)f);
+        int lit = 0;
+        for (size_t k = 0; k < nb; k++)
+            lit |= m->rho[k] > 0 || m->Le[k] > 0;
+        if (!lit)
+            continue;
+        for (uint32_t i = 0; i < F[f].nverts; i++) {
+            rp_vec3 p = V[F[f].v[i]];
+            lo = rp_v3(fmin(lo.x, p.x), fmin(lo.y, p.y), fmin(lo.z, p.z));
+            hi = rp_v3(fmax(hi.x, p.x), fmax(hi.y, p.y), fmax(hi.z, p.z));
+        }
+    }
+    double d = lo.x <= hi.x ? rp_v3_length(rp_v3_sub(hi, lo)) : 0;
+    return d > 0 ? d : rp_scene_diagonal(scene);
+}
+
 rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_disc_segment **out,
                        size_t *count, rp_error *err)
 {
@@ -620,7 +643,7 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
             p.max_per_face = RP_DISC_DEFAULT_MAX_PER_FACE;
     }
     const size_t nf = rp_scene_nfaces(scene);
-    const double diag = rp_scene_diagonal(scene);
+    const double diag = rp_disc_scale(scene);
     const double tol = RP_DISC_REL_TOL * diag;
     /* Rays start and stop this far from the wedge's points. */
     const double eta = 1e-6 * diag;

@@ -22,8 +22,9 @@
  * per scene (lights in scene order, EV before VE), which a scene of a few
  * hundred faces never reaches; past it a large scene's D1 set is partial.
  *
- * Tolerances are relative to the scene's bounding-box diagonal
- * (RP_DISC_REL_TOL), never absolute units. */
+ * Tolerances are relative to the diagonal of the box around the faces that
+ * reflect or emit (RP_DISC_REL_TOL, rp_disc_scale), never absolute units:
+ * a black ground plane, however large, changes nothing. */
 #ifndef RP_DISCONTINUITY_H
 #define RP_DISCONTINUITY_H
 
@@ -37,8 +38,8 @@
 extern "C" {
 #endif
 
-/* Points closer than this times the scene's diagonal are one point; a
- * vertex this near a plane lies on it. */
+/* Points closer than this times rp_disc_scale are one point; a vertex this
+ * near a plane lies on it. */
 #define RP_DISC_REL_TOL 1e-7
 /* The default cap on D1 segments per receiving face. */
 #define RP_DISC_DEFAULT_MAX_PER_FACE 48
@@ -61,6 +62,10 @@ typedef struct rp_disc_params {
     size_t max_per_face;  /* D1 segments kept per face; 0: RP_DISC_DEFAULT_MAX_PER_FACE */
     int no_d0, no_d1;     /* leave a kind out */
 } rp_disc_params;
+
+/* The length tolerances are relative to: the diagonal of the bounding box
+ * of the faces that reflect or emit in some band (of all faces if none). */
+double rp_disc_scale(const rp_scene *scene);
 
 /* Every discontinuity segment of the scene, sorted by face.  *out is
  * malloc'ed (free it); params may be NULL (defaults). */

@@ -681,7 +681,7 @@ rp_status rp_mesh_build_disc(rp_mesh *mesh, const rp_scene *scene, const rp_mesh
     rp_status st;
     rp_disc_segment *ds = NULL;
     size_t nds = 0;
-    ctx c = {scene, w, mesh->faces, nf, NULL, NULL, NULL, 0, NULL, RP_DISC_REL_TOL * rp_scene_diagonal(scene)};
+    ctx c = {scene, w, mesh->faces, nf, NULL, NULL, NULL, 0, NULL, RP_DISC_REL_TOL * rp_disc_scale(scene)};
     built best = {0}, cur = {0};
     rp_disc_params dp = {sizeof dp, max_per_face, 0, 0};
     if ((st = rp_disc_find(scene, &dp, &ds, &nds, err)) != RP_OK)

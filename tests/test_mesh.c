@@ -926,3 +926,42 @@ Test(discontinuity, bad_mode_and_old_size)
     rp_mesh_destroy(m);
     rp_scene_destroy(s);
 }
+
+/* Tolerances are relative to the part of the scene that reflects or emits:
+ * a black plane 2e5 wide under the shadow scene changes neither the
+ * segments nor the lit faces' elements (DESIGN.md, "scale-free"). */
+Test(discontinuity, black_plane_changes_nothing)
+{
+    rp_scene *s = rp_test_parse(DISC_SHADOW_SCENE);
+    rp_scene *g = rp_test_parse(DISC_SHADOW_SCENE "material black reflect 0\n"
+                                "quad ground black  -1e5 -1e5 -0.5  1e5 -1e5 -0.5  1e5 1e5 -0.5  -1e5 1e5 -0.5\n");
+    rp_disc_segment *a = NULL, *b = NULL;
+    size_t na = 0, nb = 0;
+    rp_error err = {""};
+    cr_assert_eq(rp_disc_find(s, NULL, &a, &na, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(rp_disc_find(g, NULL, &b, &nb, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(na, nb);
+    for (size_t i = 0; i < na; i++) {
+        cr_assert_eq(a[i].face, b[i].face);
+        cr_assert_eq(a[i].kind, b[i].kind);
+        cr_assert_leq(rp_v3_length(rp_v3_sub(a[i].a, b[i].a)) + rp_v3_length(rp_v3_sub(a[i].b, b[i].b)), 1e-12);
+    }
+    rp_mesh *ma = make_disc_mesh(s, 400), *mb = make_disc_mesh(g, 402); /* the plane: 2 triangles */
+    for (uint32_t f = 0; f < 3; f++) {
+        uint32_t fa, ca, fb, cb;
+        rp_mesh_face_elements(ma, f, &fa, &ca);
+        rp_mesh_face_elements(mb, f, &fb, &cb);
+        cr_assert_eq(ca, cb, "face %u: %u elements, %u with the plane", f, ca, cb);
+        for (uint32_t k = 0; k < ca; k++)
+            cr_assert_float_eq(rp_mesh_elements(ma)[fa + k].area, rp_mesh_elements(mb)[fb + k].area, 1e-12);
+    }
+    uint32_t fp, cp;
+    rp_mesh_face_elements(mb, 3, &fp, &cp);
+    cr_assert_eq(cp, 2);
+    free(a);
+    free(b);
+    rp_mesh_destroy(ma);
+    rp_mesh_destroy(mb);
+    rp_scene_destroy(s);
+    rp_scene_destroy(g);
+}
