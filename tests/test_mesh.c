@@ -660,6 +660,7 @@ Test(mesh, quality)
  * a segment (orientation of its vertices against the segment's line, with
  * 1e-9 of the scene's diagonal as tolerance). */
 
+#include "cli_util.h"
 #include "geometry/discontinuity.h"
 
 /* Square light [-a, a]^2 at height H facing down, square occluder
@@ -964,4 +965,29 @@ Test(discontinuity, black_plane_changes_nothing)
     rp_mesh_destroy(mb);
     rp_scene_destroy(s);
     rp_scene_destroy(g);
+}
+
+/* The option through the command line: the furnace (a closed box, one
+ * surface of six faces, rho 0.5, Le 1) meshed by discontinuity gives the
+ * closed form Le / (1 - rho) = 2 (Gauss-Seidel to its default residual
+ * 1e-6: 1e-5 relative); a bad value exits 2 naming the option. */
+Test(discontinuity, cli_mesh_option)
+{
+    rp_run r = rp_run_radpt("probe scenes/furnace.scene --method gauss-seidel --mesh discontinuity "
+                            "--elements 200 --surface-averages --json");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    double L[4];
+    cr_assert_eq(rp_json_arrays(r.out, "radiance", L, 4), 1, "%s", r.out);
+    cr_assert_float_eq(L[0], 2.0, 2e-5, "%.9g", L[0]);
+    rp_run_free(&r);
+
+    r = rp_run_radpt("probe scenes/furnace.scene --method jacobi --mesh grid --surface-averages");
+    cr_assert_eq(r.status, 2);
+    cr_assert(strstr(r.err, "--mesh") && strstr(r.err, "grid"), "%s", r.err);
+    rp_run_free(&r);
+
+    r = rp_run_radpt("probe scenes/furnace.scene --method southwell --mesh-segments 4 --surface-averages");
+    cr_assert_eq(r.status, 2);
+    cr_assert(strstr(r.err, "--mesh-segments"), "%s", r.err);
+    rp_run_free(&r);
 }
