@@ -21,8 +21,10 @@
  * grows without bound as an element degenerates; for a triangle it equals
  * (sqrt 3 / 2) * longest edge / shortest altitude. */
 #include "mesh.h"
+#include "mesh_internal.h"
 
 #include <float.h>
+#include <stddef.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,27 +43,6 @@
  * length is an exact multiple of max_edge up to rounding (1 / 0.1) is not
  * cut once more than asked. */
 #define COUNT_SLACK 1e-12
-
-typedef struct face_grid {
-    rp_vec3 c[4];       /* the face's corners (scene coordinates) */
-    rp_vec3 normal;     /* unit front normal */
-    uint32_t nverts;    /* 3 or 4 */
-    uint32_t n, m;      /* quad: cells along u and v; triangle: k in both */
-    uint32_t first;     /* first element of the face */
-    uint32_t count;     /* n m (quad) or k^2 (triangle) */
-} face_grid;
-
-struct rp_mesh {
-    size_t nelements, nvertices, nfaces, nsurfaces;
-    rp_element *elements;
-    rp_vec3 *vertices;
-    uint32_t *neighbors;  /* 4 per element */
-    size_t *vstart;       /* nvertices + 1 offsets into velems */
-    uint32_t *velems;
-    face_grid *faces;
-    uint32_t *surf_first, *surf_count;
-    double max_edge;      /* the edge length the subdivision used */
-};
 
 /* ---- union-find ------------------------------------------------------ */
 
@@ -366,6 +347,83 @@ static uint32_t edge_vertex(const build *bd, uint32_t f, uint32_t e, uint32_t s,
     return bd->edge_first[bd->edge_of[4 * f + e]] + step - 1;
 }
 
+/* Per-surface element ranges, adjacency and vertex -> element lists,
+ * from the elements and vertices alone (both mesh modes). */
+static rp_status mesh_topology(rp_mesh *mesh, const rp_surface *surf, size_t nsurf, rp_error *err)
+{
+    const size_t nel = mesh->nelements, nvert = mesh->nvertices, nfaces = mesh->nfaces;
+    edge_rec *elrec = NULL;
+    size_t *vfill = NULL;
+    if (!mesh->neighbors && !(mesh->neighbors = malloc((nel ? 4 * nel : 1) * sizeof *mesh->neighbors)))
+        goto nomem;
+    for (size_t s = 0; s < nsurf; s++) {
+        if (surf[s].nfaces == 0 || surf[s].first_face >= nfaces)
+            continue;
+        uint32_t f0 = surf[s].first_face, f1 = f0 + surf[s].nfaces - 1;
+        mesh->surf_first[s] = mesh->faces[f0].first;
+        mesh->surf_count[s] = mesh->faces[f1].first + mesh->faces[f1].count - mesh->faces[f0].first;
+    }
+
+    /* Adjacency: element edges with the same two vertices (vertices are
+     * shared only inside a surface).  An edge met by more than two elements
+     * (a non-manifold seam) gets no neighbour. */
+    size_t nel_edges = 0;
+    elrec = malloc((nel ? 4 * nel : 1) * sizeof *elrec);
+    if (!elrec)
+        goto nomem;
+    for (size_t e = 0; e < nel; e++) {
+        const rp_element *el = &mesh->elements[e];
+        for (uint32_t i = 0; i < 4; i++)
+            mesh->neighbors[4 * e + i] = RP_NONE;
+        for (uint32_t i = 0; i < el->nverts; i++) {
+            elrec[nel_edges].key = edge_key(el->v[i], el->v[(i + 1) % el->nverts]);
+            elrec[nel_edges].id = (uint32_t)(4 * e + i);
+            nel_edges++;
+        }
+    }
+    qsort(elrec, nel_edges, sizeof *elrec, edge_cmp);
+    for (size_t i = 0; i < nel_edges;) {
+        size_t j = i + 1;
+        while (j < nel_edges && elrec[j].key == elrec[i].key)
+            j++;
+        if (j - i == 2) {
+            mesh->neighbors[elrec[i].id] = elrec[i + 1].id / 4;
+            mesh->neighbors[elrec[i + 1].id] = elrec[i].id / 4;
+        }
+        i = j;
+    }
+    free(elrec);
+    elrec = NULL;
+
+    /* Vertex -> incident elements (compressed rows, elements ascending). */
+    mesh->vstart = calloc(nvert + 1, sizeof *mesh->vstart);
+    vfill = malloc((nvert ? nvert : 1) * sizeof *vfill);
+    size_t nref = 0;
+    for (size_t e = 0; e < nel; e++)
+        nref += mesh->elements[e].nverts;
+    mesh->velems = malloc((nref ? nref : 1) * sizeof *mesh->velems);
+    if (!mesh->vstart || !vfill || !mesh->velems)
+        goto nomem;
+    for (size_t e = 0; e < nel; e++)
+        for (uint32_t i = 0; i < mesh->elements[e].nverts; i++)
+            mesh->vstart[mesh->elements[e].v[i] + 1]++;
+    for (size_t v = 0; v < nvert; v++) {
+        mesh->vstart[v + 1] += mesh->vstart[v];
+        vfill[v] = mesh->vstart[v];
+    }
+    for (size_t e = 0; e < nel; e++)
+        for (uint32_t i = 0; i < mesh->elements[e].nverts; i++)
+            mesh->velems[vfill[mesh->elements[e].v[i]]++] = (uint32_t)e;
+
+    free(vfill);
+    return RP_OK;
+
+nomem:
+    free(elrec);
+    free(vfill);
+    return rp_error_set(err, RP_ERR_NOMEM, "mesh: out of memory");
+}
+
 rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp_mesh **out,
                          rp_error *err)
 {
@@ -374,13 +432,22 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     *out = NULL;
 
     double max_edge = 0;
-    size_t target = 0;
+    size_t target = 0, max_segments = 0;
+    int mode = RP_MESH_UNIFORM;
     if (params) {
-        if (params->size != 0 && params->size < sizeof(rp_mesh_params))
+        /* Callers built before the mode existed pass the old size. */
+        const size_t old_size = offsetof(rp_mesh_params, mode);
+        if (params->size != 0 && params->size < old_size)
             return rp_error_set(err, RP_ERR_INPUT, "mesh: params.size %zu is too small (%zu)",
-                                params->size, sizeof(rp_mesh_params));
+                                params->size, old_size);
         max_edge = params->max_edge;
         target = params->target_count;
+        if (params->size == 0 || params->size >= offsetof(rp_mesh_params, mode) + sizeof params->mode)
+            mode = params->mode;
+        if (params->size == 0 || params->size >= offsetof(rp_mesh_params, max_segments) + sizeof params->max_segments)
+            max_segments = params->max_segments;
+        if (mode != RP_MESH_UNIFORM && mode != RP_MESH_DISCONTINUITY)
+            return rp_error_set(err, RP_ERR_INPUT, "mesh: unknown mode %d (uniform 0, discontinuity 1)", mode);
         if (isnan(max_edge) || max_edge < 0 || isinf(max_edge))
             return rp_error_set(err, RP_ERR_INPUT,
                                 "mesh: max_edge must be a positive finite length (got %g)", max_edge);
@@ -423,8 +490,6 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     double *class_len = NULL, *cc = NULL, *stol = NULL;
     rp_vec3 *slo = NULL, *shi = NULL;
     unsigned char *black = NULL;
-    edge_rec *elrec = NULL;
-    size_t *vfill = NULL;
     if (!mesh || !parent || !wid || !edge_of || !keys || !erec || !fc) {
         st = RP_ERR_NOMEM;
         goto nomem;
@@ -634,6 +699,13 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
         black[fc[2 * f]] = black[fc[2 * f + 1]] = (unsigned char)!lit;
     }
 
+    if (mode == RP_MESH_DISCONTINUITY) {
+        rp_mesh_weld mw = {wid, edge_of, ue_a, ue_b, nue, nweld, wpos};
+        if ((st = rp_mesh_build_disc(mesh, scene, &mw, max_edge, target, max_segments, err)) != RP_OK)
+            goto fail;
+        goto topology;
+    }
+
     /* The longest element edge. */
     if (max_edge == 0) {
         max_edge = find_max_edge(class_len, black, nclass, fc, mesh->faces, nfaces, target, cc);
@@ -799,66 +871,10 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     free(grid);
     grid = NULL;
 
-    for (size_t s = 0; s < nsurf; s++) {
-        if (surf[s].nfaces == 0 || surf[s].first_face >= nfaces)
-            continue;
-        uint32_t f0 = surf[s].first_face, f1 = f0 + surf[s].nfaces - 1;
-        mesh->surf_first[s] = mesh->faces[f0].first;
-        mesh->surf_count[s] = mesh->faces[f1].first + mesh->faces[f1].count - mesh->faces[f0].first;
-    }
+topology:
+    if ((st = mesh_topology(mesh, surf, nsurf, err)) != RP_OK)
+        goto fail;
 
-    /* Adjacency: element edges with the same two vertices (vertices are
-     * shared only inside a surface).  An edge met by more than two elements
-     * (a non-manifold seam) gets no neighbour. */
-    size_t nel_edges = 0;
-    elrec = malloc((nel ? 4 * nel : 1) * sizeof *elrec);
-    if (!elrec)
-        goto nomem;
-    for (size_t e = 0; e < nel; e++) {
-        const rp_element *el = &mesh->elements[e];
-        for (uint32_t i = 0; i < 4; i++)
-            mesh->neighbors[4 * e + i] = RP_NONE;
-        for (uint32_t i = 0; i < el->nverts; i++) {
-            elrec[nel_edges].key = edge_key(el->v[i], el->v[(i + 1) % el->nverts]);
-            elrec[nel_edges].id = (uint32_t)(4 * e + i);
-            nel_edges++;
-        }
-    }
-    qsort(elrec, nel_edges, sizeof *elrec, edge_cmp);
-    for (size_t i = 0; i < nel_edges;) {
-        size_t j = i + 1;
-        while (j < nel_edges && elrec[j].key == elrec[i].key)
-            j++;
-        if (j - i == 2) {
-            mesh->neighbors[elrec[i].id] = elrec[i + 1].id / 4;
-            mesh->neighbors[elrec[i + 1].id] = elrec[i].id / 4;
-        }
-        i = j;
-    }
-    free(elrec);
-    elrec = NULL;
-
-    /* Vertex -> incident elements (compressed rows, elements ascending). */
-    mesh->vstart = calloc(nvert + 1, sizeof *mesh->vstart);
-    vfill = malloc((nvert ? nvert : 1) * sizeof *vfill);
-    size_t nref = 0;
-    for (size_t e = 0; e < nel; e++)
-        nref += mesh->elements[e].nverts;
-    mesh->velems = malloc((nref ? nref : 1) * sizeof *mesh->velems);
-    if (!mesh->vstart || !vfill || !mesh->velems)
-        goto nomem;
-    for (size_t e = 0; e < nel; e++)
-        for (uint32_t i = 0; i < mesh->elements[e].nverts; i++)
-            mesh->vstart[mesh->elements[e].v[i] + 1]++;
-    for (size_t v = 0; v < nvert; v++) {
-        mesh->vstart[v + 1] += mesh->vstart[v];
-        vfill[v] = mesh->vstart[v];
-    }
-    for (size_t e = 0; e < nel; e++)
-        for (uint32_t i = 0; i < mesh->elements[e].nverts; i++)
-            mesh->velems[vfill[mesh->elements[e].v[i]]++] = (uint32_t)e;
-
-    free(vfill);
     free(parent);
     free(wid);
     free(edge_of);
@@ -882,8 +898,6 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
 nomem:
     st = rp_error_set(err, RP_ERR_NOMEM, "mesh: out of memory");
 fail:
-    free(vfill);
-    free(elrec);
     free(grid);
     free(parent);
     free(wid);
@@ -912,6 +926,10 @@ void rp_mesh_destroy(rp_mesh *mesh)
 {
     if (!mesh)
         return;
+    for (size_t f = 0; mesh->faces && f < mesh->nfaces; f++) {
+        free(mesh->faces[f].bstart);
+        free(mesh->faces[f].belems);
+    }
     free(mesh->elements);
     free(mesh->vertices);
     free(mesh->neighbors);
@@ -971,6 +989,8 @@ uint32_t rp_mesh_locate(const rp_mesh *mesh, uint32_t face, rp_vec3 p)
     if (face >= mesh->nfaces)
         return RP_NONE;
     const face_grid *fg = &mesh->faces[face];
+    if (fg->triangulated)
+        return rp_mesh_locate_disc(mesh, fg, p);
     if (fg->nverts == 4) {
         double u, v;
         quad_inverse(fg->c, fg->normal, p, &u, &v);

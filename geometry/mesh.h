@@ -20,10 +20,22 @@ extern "C" {
 
 typedef struct rp_mesh rp_mesh;
 
+/* How faces are cut. */
+typedef enum rp_mesh_mode {
+    RP_MESH_UNIFORM = 0,      /* regular grids of quads or triangles */
+    RP_MESH_DISCONTINUITY = 1 /* triangles conforming to contact lines (D0) and
+                                 the umbra/penumbra boundaries of area lights
+                                 (D1): discontinuity.h, mesh_disc.c */
+} rp_mesh_mode;
+
 typedef struct rp_mesh_params {
     size_t size;          /* sizeof(rp_mesh_params), so the struct can grow */
     double max_edge;      /* target longest element edge, scene units; 0: unused */
     size_t target_count;  /* target total element count; 0: unused */
+    /* Since 0.16 (a caller whose size ends before a field gets its default): */
+    int mode;             /* rp_mesh_mode; default uniform */
+    size_t max_segments;  /* discontinuity: D1 segments kept per face; 0: the
+                             default, RP_DISC_DEFAULT_MAX_PER_FACE */
 } rp_mesh_params;
 
 /* Default: about 1,000 elements for the whole scene. */
@@ -51,7 +63,15 @@ typedef struct rp_mesh_quality {
     double min_area, max_area;
 } rp_mesh_quality;
 
-/* Subdivides every face of the scene.  With both max_edge and target_count
+/* Subdivides every face of the scene.  In discontinuity mode every face
+ * that reflects or emits is triangulated (constrained Delaunay, in its
+ * plane) so that every discontinuity segment on it (discontinuity.h) is a
+ * union of element edges, with Steiner points on a triangular lattice of
+ * spacing h between them; h is set by max_edge or calibrated so the total
+ * comes near target_count.  Vertices on an edge shared by faces of one
+ * surface are shared as in the uniform mesh (no T-vertices inside a
+ * surface); rp_mesh_locate goes through a bucket grid instead of the
+ * grid inversion.  With both max_edge and target_count
  * zero, aims at RP_MESH_DEFAULT_COUNT elements more than the scene's faces.  Exactly one of them may be set.  Faces
  * of surfaces black in every band (rho = Le = 0) are never cut: one element
  * each, counted in target_count; the rest of the count goes to the faces

@@ -16,6 +16,7 @@
 
 #include <gsl/gsl_rng.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -648,4 +649,345 @@ Test(mesh, quality)
     cr_assert_float_eq(q.min_area, 0.5 / 64, 1e-15); /* k = ceil(sqrt 2 / 0.2) = 8 */
     rp_mesh_destroy(m);
     rp_scene_destroy(s);
+}
+
+/* ---- discontinuity meshes (geometry/discontinuity.h, mesh_disc.c) ------ */
+/* Suite "discontinuity": the segments against closed forms, and the mesh
+ * built on them against the same brute-force checks as the uniform mesh
+ * (conformity, winding, locate), plus: element areas of each face sum to
+ * the face's area (1e-9 relative: triangles of a CDT, whose vertices were
+ * mapped back from 2-D, sum to it up to rounding), and no element straddles
+ * a segment (orientation of its vertices against the segment's line, with
+ * 1e-9 of the scene's diagonal as tolerance). */
+
+#include "cli_util.h"
+#include "geometry/discontinuity.h"
+
+/* Square light [-a, a]^2 at height H facing down, square occluder
+ * [-b, b]^2 at height h, floor [-5, 5]^2 at z = 0 facing up, with
+ * a = 0.5, b = 1.5, H = 3, h = 1.
+ *
+ * Similar triangles: floor point x sees light point q through the
+ * occluder's plane at x + (q - x) h / H, so (one coordinate, x >= 0) q is
+ * hidden iff x (1 - h/H) + q h/H <= b, i.e. x <= (b H - q h) / (H - h).
+ * The light and occluder are parallel axis-aligned squares, so blocking
+ * separates by coordinate.  Umbra (every q hidden, q = a the last):
+ *   |x| <= (b H - a h) / (H - h) = (4.5 - 0.5) / 2 = 2.0,
+ * penumbra's outer edge (some q hidden, q = -a the last):
+ *   |x| <= (b H + a h) / (H - h) = (4.5 + 0.5) / 2 = 2.5,
+ * and the same in y.  The visible fraction of the light is a product of
+ * one factor in x and one in y, so its derivative jumps on the whole lines
+ * x = +-2, +-2.5 where the y factor is not zero (|y| < 2.5) and likewise
+ * in y: D1 boundaries are the eight segments x or y = +-2 or +-2.5 with
+ * the other coordinate in [-2.5, 2.5]. */
+#define DISC_SHADOW_SCENE                                                   \
+    "material w reflect 0.5\n"                                              \
+    "material lamp reflect 0 emit 10\n"                                     \
+    "quad floor w  -5 -5 0  5 -5 0  5 5 0  -5 5 0\n"                        \
+    "quad occluder w  -1.5 -1.5 1  1.5 -1.5 1  1.5 1.5 1  -1.5 1.5 1\n"     \
+    "quad light lamp  -0.5 -0.5 3  -0.5 0.5 3  0.5 0.5 3  0.5 -0.5 3\n"
+
+static const double shadow_lines[4] = {-2.5, -2.0, 2.0, 2.5};
+
+/* Which of the eight lines segment (a, b) lies on (0..3: x = c, 4..7:
+ * y = c), -1 for none. */
+static int shadow_line(rp_vec3 a, rp_vec3 b, double tol)
+{
+    for (int k = 0; k < 4; k++) {
+        double c = shadow_lines[k];
+        if (fabs(a.x - c) <= tol && fabs(b.x - c) <= tol)
+            return k;
+        if (fabs(a.y - c) <= tol && fabs(b.y - c) <= tol)
+            return 4 + k;
+    }
+    return -1;
+}
+
+Test(discontinuity, umbra_and_penumbra_by_similar_triangles)
+{
+    rp_scene *s = rp_test_parse(DISC_SHADOW_SCENE);
+    rp_disc_segment *seg = NULL;
+    size_t n = 0;
+    rp_error err = {""};
+    cr_assert_eq(rp_disc_find(s, NULL, &seg, &n, &err), RP_OK, "%s", err.message);
+    const double tol = 1e-9 * rp_scene_diagonal(s);
+    /* Covered length of each line within [-2.5, 2.5]: after merging,
+     * segments on one line do not overlap, so lengths add. */
+    double covered[8] = {0};
+    size_t on_floor = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (seg[i].face != 0)
+            continue;
+        cr_assert_neq(seg[i].kind, RP_DISC_D0, "no contact in this scene");
+        int k = shadow_line(seg[i].a, seg[i].b, tol);
+        cr_assert_geq(k, 0, "segment (%g %g) - (%g %g) is on no umbra or penumbra line", seg[i].a.x,
+                      seg[i].a.y, seg[i].b.x, seg[i].b.y);
+        double lo = k < 4 ? fmin(seg[i].a.y, seg[i].b.y) : fmin(seg[i].a.x, seg[i].b.x);
+        double hi = k < 4 ? fmax(seg[i].a.y, seg[i].b.y) : fmax(seg[i].a.x, seg[i].b.x);
+        cr_assert_geq(lo, -2.5 - tol);
+        cr_assert_leq(hi, 2.5 + tol);
+        covered[k] += hi - lo;
+        on_floor++;
+    }
+    for (int k = 0; k < 8; k++)
+        cr_assert_float_eq(covered[k], 5.0, 1e-9 * 5.0, "line %d covered over %.17g of 5", k, covered[k]);
+    cr_assert_eq(on_floor, 8, "%zu segments on the floor, 8 expected after merging", on_floor);
+    free(seg);
+    rp_scene_destroy(s);
+}
+
+/* Element areas per face sum to the face's area (triangles only). */
+static void check_disc_areas(const rp_scene *s, const rp_mesh *m)
+{
+    const rp_face *F = rp_scene_faces(s);
+    const rp_element *E = rp_mesh_elements(m);
+    size_t covered = 0;
+    for (uint32_t f = 0; f < rp_scene_nfaces(s); f++) {
+        uint32_t first, count;
+        rp_mesh_face_elements(m, f, &first, &count);
+        cr_assert_gt(count, 0);
+        double sum = 0;
+        for (uint32_t e = first; e < first + count; e++) {
+            cr_assert_eq(E[e].face, f);
+            cr_assert_eq(E[e].nverts, 3);
+            cr_assert_eq(E[e].v[3], RP_NONE);
+            cr_assert_gt(E[e].area, 0);
+            sum += E[e].area;
+        }
+        cr_assert_float_eq(sum, F[f].area, 1e-9 * F[f].area, "face %u: elements %.17g, face %.17g", f, sum,
+                           F[f].area);
+        covered += count;
+    }
+    cr_assert_eq(covered, rp_mesh_nelements(m));
+}
+
+/* No element of segment i's face has vertices strictly on both sides of
+ * the segment's line where the segment passes through it. */
+static void check_no_straddle(const rp_scene *s, const rp_mesh *m, const rp_disc_segment *seg, size_t n)
+{
+    const rp_element *E = rp_mesh_elements(m);
+    const rp_vec3 *V = rp_mesh_vertices(m);
+    const double tol = 1e-9 * rp_scene_diagonal(s);
+    for (size_t i = 0; i < n; i++) {
+        uint32_t first, count;
+        rp_mesh_face_elements(m, seg[i].face, &first, &count);
+        rp_vec3 nrm = rp_scene_faces(s)[seg[i].face].normal;
+        double ax, ay, bx, by;
+        to2d(nrm, seg[i].a, seg[i].a, &ax, &ay);
+        to2d(nrm, seg[i].a, seg[i].b, &bx, &by);
+        double len = hypot(bx - ax, by - ay);
+        for (uint32_t e = first; e < first + count; e++) {
+            double side[3], along[3];
+            int pos = 0, neg = 0;
+            for (int k = 0; k < 3; k++) {
+                double x, y;
+                to2d(nrm, seg[i].a, V[E[e].v[k]], &x, &y);
+                side[k] = ((bx - ax) * (y - ay) - (by - ay) * (x - ax)) / len; /* orientation */
+                along[k] = ((bx - ax) * (x - ax) + (by - ay) * (y - ay)) / (len * len);
+                pos += side[k] > tol;
+                neg += side[k] < -tol;
+            }
+            if (!pos || !neg)
+                continue;
+            /* Where the line crosses the triangle, as a parameter of the
+             * segment: the crossings of the edges whose ends change side. */
+            double t0 = INFINITY, t1 = -INFINITY;
+            for (int k = 0; k < 3; k++) {
+                int l = (k + 1) % 3;
+                if ((side[k] > 0) == (side[l] > 0) || side[k] == side[l])
+                    continue;
+                double u = side[k] / (side[k] - side[l]);
+                double t = along[k] + u * (along[l] - along[k]);
+                t0 = fmin(t0, t);
+                t1 = fmax(t1, t);
+            }
+            double lo = fmax(t0, 0), hi = fmin(t1, 1);
+            cr_assert_leq((hi - lo) * len, tol, "element %u straddles segment %zu of face %u", e, i, seg[i].face);
+        }
+    }
+}
+
+static rp_mesh *make_disc_mesh(const rp_scene *s, size_t target)
+{
+    rp_mesh_params p = {.size = sizeof p, .target_count = target, .mode = RP_MESH_DISCONTINUITY};
+    rp_mesh *m = NULL;
+    rp_error err = {""};
+    cr_assert_eq(rp_mesh_create(s, &p, &m, &err), RP_OK, "mesh: %s", err.message);
+    return m;
+}
+
+Test(discontinuity, mesh_follows_shadow_boundaries)
+{
+    rp_scene *s = rp_test_parse(DISC_SHADOW_SCENE);
+    rp_mesh *m = make_disc_mesh(s, 600);
+    rp_disc_segment *seg = NULL;
+    size_t n = 0;
+    rp_error err = {""};
+    cr_assert_eq(rp_disc_find(s, NULL, &seg, &n, &err), RP_OK, "%s", err.message);
+    cr_assert_gt(n, 0);
+    check_disc_areas(s, m);
+    check_elements(m);
+    check_conformity(s, m, NULL);
+    check_locate(s, m, 200, 7);
+    check_no_straddle(s, m, seg, n);
+    /* About the count asked (the calibration's stop is 3%; the segments
+     * add elements it cannot take back): within 25%. */
+    cr_assert(rp_mesh_nelements(m) > 450 && rp_mesh_nelements(m) < 750, "%zu elements for 600",
+              rp_mesh_nelements(m));
+    free(seg);
+    rp_mesh_destroy(m);
+    rp_scene_destroy(s);
+}
+
+/* A 1 x 1 x 1 box standing on the floor at [1, 2] x [1, 2]: its four sides
+ * touch the floor along the footprint's four edges (D0); its bottom is
+ * coplanar with the floor and adds nothing. */
+#define DISC_BOX_SCENE                                                      \
+    "material w reflect 0.5\n"                                              \
+    "material lamp reflect 0 emit 10\n"                                     \
+    "quad floor w  -5 -5 0  5 -5 0  5 5 0  -5 5 0\n"                        \
+    "box block w  1 1 0  2 2 1  outward\n"                                  \
+    "quad light lamp  -0.5 -0.5 4  -0.5 0.5 4  0.5 0.5 4  0.5 -0.5 4\n"
+
+Test(discontinuity, box_footprint_is_d0)
+{
+    rp_scene *s = rp_test_parse(DISC_BOX_SCENE);
+    rp_disc_segment *seg = NULL;
+    size_t n = 0;
+    rp_error err = {""};
+    cr_assert_eq(rp_disc_find(s, NULL, &seg, &n, &err), RP_OK, "%s", err.message);
+    const double tol = 1e-9 * rp_scene_diagonal(s);
+    const rp_vec3 foot[4][2] = {{{1, 1, 0}, {2, 1, 0}}, {{2, 1, 0}, {2, 2, 0}},
+                                {{2, 2, 0}, {1, 2, 0}}, {{1, 2, 0}, {1, 1, 0}}};
+    int found[4] = {0};
+    size_t d0 = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (seg[i].kind != RP_DISC_D0)
+            continue;
+        cr_assert_eq(seg[i].face, 0, "D0 on face %u: only the floor has contacts inside it", seg[i].face);
+        d0++;
+        for (int k = 0; k < 4; k++) {
+            double d1 = rp_v3_length(rp_v3_sub(seg[i].a, foot[k][0])) + rp_v3_length(rp_v3_sub(seg[i].b, foot[k][1]));
+            double d2 = rp_v3_length(rp_v3_sub(seg[i].a, foot[k][1])) + rp_v3_length(rp_v3_sub(seg[i].b, foot[k][0]));
+            if (fmin(d1, d2) <= 2 * tol)
+                found[k]++;
+        }
+    }
+    cr_assert_eq(d0, 4, "%zu D0 segments", d0);
+    for (int k = 0; k < 4; k++)
+        cr_assert_eq(found[k], 1, "footprint edge %d found %d times", k, found[k]);
+
+    rp_mesh *m = make_disc_mesh(s, 500);
+    check_disc_areas(s, m);
+    check_elements(m);
+    check_conformity(s, m, NULL); /* the box is one surface of six faces */
+    check_locate(s, m, 100, 11);
+    check_no_straddle(s, m, seg, n);
+    free(seg);
+    rp_mesh_destroy(m);
+    rp_scene_destroy(s);
+}
+
+Test(discontinuity, cornell_box)
+{
+    rp_scene *s = rp_test_load("scenes/cornell.scene");
+    rp_disc_segment *seg = NULL;
+    size_t n = 0;
+    rp_error err = {""};
+    cr_assert_eq(rp_disc_find(s, NULL, &seg, &n, &err), RP_OK, "%s", err.message);
+    rp_mesh *m = make_disc_mesh(s, 1000);
+    check_disc_areas(s, m);
+    check_elements(m);
+    check_conformity(s, m, NULL);
+    check_locate(s, m, 50, 3);
+    check_no_straddle(s, m, seg, n);
+    /* The boxes' footprints: 4 + 4 D0 segments on the floor (face 0). */
+    size_t d0 = 0;
+    for (size_t i = 0; i < n; i++)
+        d0 += seg[i].face == 0 && seg[i].kind == RP_DISC_D0;
+    cr_assert_eq(d0, 8);
+    free(seg);
+    rp_mesh_destroy(m);
+    rp_scene_destroy(s);
+}
+
+Test(discontinuity, bad_mode_and_old_size)
+{
+    rp_scene *s = rp_test_parse(DISC_BOX_SCENE);
+    rp_mesh_params p = {.size = sizeof p, .target_count = 100, .mode = 7};
+    rp_mesh *m = NULL;
+    rp_error err = {""};
+    cr_assert_eq(rp_mesh_create(s, &p, &m, &err), RP_ERR_INPUT);
+    cr_assert(strstr(err.message, "mode"), "%s", err.message);
+    cr_assert_null(m);
+    /* A caller built before the mode existed: uniform. */
+    p.size = offsetof(rp_mesh_params, mode);
+    cr_assert_eq(rp_mesh_create(s, &p, &m, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(rp_mesh_elements(m)[0].nverts, 4);
+    rp_mesh_destroy(m);
+    rp_scene_destroy(s);
+}
+
+/* Tolerances are relative to the part of the scene that reflects or emits:
+ * a black plane 2e5 wide under the shadow scene changes neither the
+ * segments nor the lit faces' elements (DESIGN.md, "scale-free"). */
+Test(discontinuity, black_plane_changes_nothing)
+{
+    rp_scene *s = rp_test_parse(DISC_SHADOW_SCENE);
+    rp_scene *g = rp_test_parse(DISC_SHADOW_SCENE "material black reflect 0\n"
+                                "quad ground black  -1e5 -1e5 -0.5  1e5 -1e5 -0.5  1e5 1e5 -0.5  -1e5 1e5 -0.5\n");
+    rp_disc_segment *a = NULL, *b = NULL;
+    size_t na = 0, nb = 0;
+    rp_error err = {""};
+    cr_assert_eq(rp_disc_find(s, NULL, &a, &na, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(rp_disc_find(g, NULL, &b, &nb, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(na, nb);
+    for (size_t i = 0; i < na; i++) {
+        cr_assert_eq(a[i].face, b[i].face);
+        cr_assert_eq(a[i].kind, b[i].kind);
+        cr_assert_leq(rp_v3_length(rp_v3_sub(a[i].a, b[i].a)) + rp_v3_length(rp_v3_sub(a[i].b, b[i].b)), 1e-12);
+    }
+    rp_mesh *ma = make_disc_mesh(s, 400), *mb = make_disc_mesh(g, 402); /* the plane: 2 triangles */
+    for (uint32_t f = 0; f < 3; f++) {
+        uint32_t fa, ca, fb, cb;
+        rp_mesh_face_elements(ma, f, &fa, &ca);
+        rp_mesh_face_elements(mb, f, &fb, &cb);
+        cr_assert_eq(ca, cb, "face %u: %u elements, %u with the plane", f, ca, cb);
+        for (uint32_t k = 0; k < ca; k++)
+            cr_assert_float_eq(rp_mesh_elements(ma)[fa + k].area, rp_mesh_elements(mb)[fb + k].area, 1e-12);
+    }
+    uint32_t fp, cp;
+    rp_mesh_face_elements(mb, 3, &fp, &cp);
+    cr_assert_eq(cp, 2);
+    free(a);
+    free(b);
+    rp_mesh_destroy(ma);
+    rp_mesh_destroy(mb);
+    rp_scene_destroy(s);
+    rp_scene_destroy(g);
+}
+
+/* The option through the command line: the furnace (a closed box, one
+ * surface of six faces, rho 0.5, Le 1) meshed by discontinuity gives the
+ * closed form Le / (1 - rho) = 2 (Gauss-Seidel to its default residual
+ * 1e-6: 1e-5 relative); a bad value exits 2 naming the option. */
+Test(discontinuity, cli_mesh_option)
+{
+    rp_run r = rp_run_radpt("probe scenes/furnace.scene --method gauss-seidel --mesh discontinuity "
+                            "--elements 200 --surface-averages --json");
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    double L[4];
+    cr_assert_eq(rp_json_arrays(r.out, "radiance", L, 4), 1, "%s", r.out);
+    cr_assert_float_eq(L[0], 2.0, 2e-5, "%.9g", L[0]);
+    rp_run_free(&r);
+
+    r = rp_run_radpt("probe scenes/furnace.scene --method jacobi --mesh grid --surface-averages");
+    cr_assert_eq(r.status, 2);
+    cr_assert(strstr(r.err, "--mesh") && strstr(r.err, "grid"), "%s", r.err);
+    rp_run_free(&r);
+
+    r = rp_run_radpt("probe scenes/furnace.scene --method southwell --mesh-segments 4 --surface-averages");
+    cr_assert_eq(r.status, 2);
+    cr_assert(strstr(r.err, "--mesh-segments"), "%s", r.err);
+    rp_run_free(&r);
 }

@@ -755,7 +755,7 @@ Test(raycast, hits_name_their_element)
     put_quad(&t, "floor", "w", rp_v3(0, 0, 0), rp_v3(0, 0, 2), rp_v3(3, 0, 2), rp_v3(3, 0, 0));
     put_tri(&t, "lamp", "lamp", rp_v3(0, 2, 0), rp_v3(3, 2, 0), rp_v3(0, 2, 2));
     rp_scene *s = text_parse(&t);
-    rp_mesh_params mp = {sizeof mp, 0.25, 0};
+    rp_mesh_params mp = {.size = sizeof mp, .max_edge = 0.25};
     rp_mesh *m = NULL;
     rp_error err = {""};
     cr_assert_eq(rp_mesh_create(s, &mp, &m, &err), RP_OK, "%s", err.message);

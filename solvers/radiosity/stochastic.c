@@ -130,6 +130,7 @@ static const rp_option_spec sj_options[] = {
      "faces that reflect or emit (exclusive with --max-edge)",
      "the faces + 1000"},
     {"max-edge", "L", "target longest element edge in scene units (exclusive with --elements)", NULL},
+    RP_RAD_MESH_MODE_OPTIONS,
     {"rays", "N", "rays per iteration, all batches together (rounded down to a multiple of --batches)",
      "100000"},
     {"batches", "K",

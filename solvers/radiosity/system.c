@@ -121,6 +121,19 @@ rp_status rp_rad_mesh_params(const char *method, const rp_options *o, rp_mesh_pa
         return rp_error_set(err, RP_ERR_INPUT, "%s: --max-edge must be positive", method);
     mp->target_count = elements;
     mp->max_edge = max_edge;
+    const char *mode = rp_options_word(o, "mesh");
+    if (!mode || strcmp(mode, "uniform") == 0)
+        mp->mode = RP_MESH_UNIFORM;
+    else if (strcmp(mode, "discontinuity") == 0)
+        mp->mode = RP_MESH_DISCONTINUITY;
+    else
+        return rp_error_set(err, RP_ERR_INPUT, "%s: --mesh: '%s' is not uniform or discontinuity", method, mode);
+    unsigned long segs = RP_DISC_DEFAULT_MAX_PER_FACE;
+    if ((st = rp_options_uint(o, "mesh-segments", 1, 1u << 20, &segs, err)) != RP_OK)
+        return st;
+    if (rp_options_get(o, "mesh-segments") && mp->mode != RP_MESH_DISCONTINUITY)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: --mesh-segments needs --mesh discontinuity", method);
+    mp->max_segments = segs;
     return RP_OK;
 }
 

@@ -18,6 +18,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../../geometry/discontinuity.h"
 #include "../../geometry/mesh.h"
 #include "../../geometry/raycast.h"
 #include "../../geometry/scene.h"
@@ -121,6 +122,19 @@ typedef struct rp_rad_system {
 #define RP_RAD_STR_(x) #x
 #define RP_RAD_STR(x) RP_RAD_STR_(x)
 
+/* The mesh kind (mesh.h, rp_mesh_mode) and the discontinuity mesh's cap,
+ * shared with stochastic-jacobi. */
+#define RP_RAD_MESH_MODE_OPTIONS                                                             \
+    {"mesh", "uniform|discontinuity",                                                        \
+     "uniform: a regular grid per face; discontinuity: triangles (CGAL constrained Delaunay) " \
+     "whose edges follow contact lines (D0) and the umbra/penumbra boundaries of area lights " \
+     "(D1: EV and VE wedges of silhouette edges, kept where a sampled visibility test finds " \
+     "them real; Heckbert 1992, Lischinski et al. 1992), about as many elements as asked",   \
+     "uniform"},                                                                             \
+    {"mesh-segments", "N",                                                                   \
+     "discontinuity mesh: D1 segments kept per face, the longest first (D0 all kept)",       \
+     RP_RAD_STR(RP_DISC_DEFAULT_MAX_PER_FACE)}
+
 /* Option specs every classic solver takes; a method's spec array lists
  * these, then its own, then {NULL}. */
 #define RP_RAD_MESH_OPTIONS                                                                  \
@@ -130,6 +144,7 @@ typedef struct rp_rad_system {
      "the faces + 1000"},                                                                                \
     {"max-edge", "L", "target longest element edge in scene units (exclusive with --elements)", \
      NULL},                                                                                  \
+    RP_RAD_MESH_MODE_OPTIONS,                                                                \
     {"ff", "analytic|montecarlo|hemicube",                                                   \
      "form factors: contour integral x ray visibility, area sampling, or hemicube",          \
      "analytic"},                                                                            \
