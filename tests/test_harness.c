@@ -143,6 +143,21 @@ Test(metrics, debiased_mse_finds_the_error_under_reference_noise)
         cr_expect(m.rmse * m.rmse - truth > 10 * d.se, "seed %lu: plain MSE %g", seed, m.rmse * m.rmse);
         cr_expect(rp_metrics_resolved(&d), "seed %lu: se %g of %g", seed, d.se, d.mse);
     }
+    /* an answer with outliers (fireflies: 5 values 30 too high) is still
+     * resolved: the empirical standard error counts their spread, the
+     * normal one does not (metrics.h) */
+    synthetic(11, a, K, N, x, r, v);
+    double truth_ff = 0;
+    for (size_t k = 0; k < K; k++) {
+        if (k % 4000 == 1)
+            x[k] += 30;
+        double e = x[k] - (1 + (double)(k % 7));
+        truth_ff += e * e / K;
+    }
+    rp_debiased_mse f;
+    rp_metrics_debiased_image(x, r, v, NULL, K, 1, &f);
+    cr_expect(fabs(f.mse - truth_ff) <= 4 * f.se, "%g vs %g, se %g", f.mse, truth_ff, f.se);
+    cr_expect(rp_metrics_resolved(&f), "se %g of %g", f.se, f.mse);
     /* no error at all: nothing to resolve */
     synthetic(99, 0, K, N, x, r, v);
     rp_debiased_mse d;

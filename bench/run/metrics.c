@@ -56,14 +56,10 @@ double rp_metrics_reference_rmse_se(const float *var, const unsigned char *mask,
     return k ? sqrt(s / (double)k) : NAN;
 }
 
-/* Mean and standard error of the t_k (metrics.h), NaN without values. */
-static void debiased_finish(gsl_rstat_workspace *w, int noisy, rp_debiased_mse *out)
-{
-    out->count = gsl_rstat_n(w);
-    out->mse = out->count ? gsl_rstat_mean(w) : NAN;
-    out->se = !out->count ? NAN : !noisy ? 0 : out->count > 1 ? gsl_rstat_sd_mean(w) : INFINITY;
-    gsl_rstat_free(w);
-}
+/* Var(t_k) for a reference value with a normal error of variance v
+ * around a fixed error e (metrics.h): 4 e^2 v + 2 v^2, with e^2
+ * estimated by max(t, 0). */
+static double t_variance_normal(double t, double v) { return 4 * (t > 0 ? t : 0) * v + 2 * v * v; }
 
 void rp_metrics_debiased_image(const float *img, const float *ref, const float *var,
                                const unsigned char *mask, size_t npix, size_t nb,
@@ -76,17 +72,34 @@ void rp_metrics_debiased_image(const float *img, const float *ref, const float *
         return;
     }
     int noisy = 0;
+    double model = 0;
     for (size_t i = 0; i < npix; i++) {
         if (mask && !mask[i])
             continue;
         for (size_t b = 0; b < nb; b++) {
             size_t k = i * nb + b;
-            double d = (double)img[k] - ref[k], v = var ? var[k] : 0;
+            double d = (double)img[k] - ref[k], v = var ? var[k] : 0, t = d * d - v;
             noisy |= v != 0;
-            gsl_rstat_add(d * d - v, w);
+            gsl_rstat_add(t, w);
+            model += t_variance_normal(t, v);
         }
     }
-    debiased_finish(w, noisy, out);
+    size_t K = gsl_rstat_n(w);
+    out->count = K;
+    out->mse = K ? gsl_rstat_mean(w) : NAN;
+    if (!K)
+        out->se = NAN;
+    else if (!noisy)
+        out->se = 0;
+    else if (K < 2)
+        out->se = INFINITY;
+    else {
+        /* both overestimate the standard error, for different reasons
+         * (metrics.h): the smaller is nearer */
+        double empirical = gsl_rstat_sd_mean(w), normal = sqrt(model) / (double)K;
+        out->se = empirical < normal ? empirical : normal;
+    }
+    gsl_rstat_free(w);
 }
 
 void rp_metrics_debiased_surfaces(const double *x, const double *ref, const double *rse,
@@ -102,11 +115,9 @@ void rp_metrics_debiased_surfaces(const double *x, const double *ref, const doub
             double r = ref[i * nb + b];
             if (!(r > 0))
                 continue;
-            double e = (x[i * nb + b] - r) / r, s = rse ? rse[i * nb + b] / r : 0, v = s * s, t = e * e - v;
+            double e = (x[i * nb + b] - r) / r, s = rse ? rse[i * nb + b] / r : 0, t = e * e - s * s;
             st += t;
-            /* Var(t) for r's error normal with variance v around a fixed
-             * error: 4 e^2 v + 2 v^2, with e^2 estimated by max(t, 0) */
-            var += 4 * (t > 0 ? t : 0) * v + 2 * v * v;
+            var += t_variance_normal(t, s * s);
             m++;
         }
     }

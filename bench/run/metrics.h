@@ -52,16 +52,21 @@ double rp_metrics_reference_rmse_se(const float *var, const unsigned char *mask,
  *
  * and mse = 1/K sum t_k with t_k = (x_k - r_k)^2 - v_k is unbiased for the
  * MSE against L (it may be negative when the reference's noise hides the
- * error).  se is the standard error of that mean:
- *   image:    sd(t) / sqrt(K) over 10^4 - 10^5 values (GSL's running
- *             statistics): it covers heavy-tailed pixel noise and the noise
- *             of the variance estimates and, pessimistically, how the error
- *             itself varies over the values (which is fixed, not random);
- *   surfaces: sqrt(sum 4 e_k^2 v_k + 2 v_k^2) / K, the variance of t_k when
- *             r_k's error is normal (a surface average sums thousands of
- *             samples) around a fixed error e_k, with e_k^2 estimated by
- *             max(t_k, 0): tens of values are too few for an empirical
- *             spread, which the errors' own differences would dominate.
+ * error).  se is the standard error of that mean.  Given the errors e_k,
+ * Var(t_k) = 4 e_k^2 v_k + 2 v_k^2 when r_k's error is normal (its
+ * "normal" estimate, with e_k^2 estimated by max(t_k, 0) and v_k by its
+ * estimate, sums these: se = sqrt(sum) / K).  Two estimates, each above
+ * the truth in expectation for its own reason:
+ *   empirical: sd(t) / sqrt(K) (GSL's running statistics), which also
+ *              counts how e_k^2 itself varies over the values (fixed, not
+ *              random): too high where the answer has outliers (a Monte
+ *              Carlo answer's fireflies);
+ *   normal:    the sum above, whose v_k^2 is too high where the
+ *              reference's variance estimate is heavy-tailed (its own
+ *              fireflies: 3x too high between two 128-spp references of
+ *              the Cornell box, where the empirical one is exact).
+ * The image takes the smaller; surfaces (tens of values, each the mean of
+ * thousands of samples, so nearly normal) the normal one.
  * With every v = 0 (an exact reference) mse is the plain MSE and se is 0.
  * An infinite v (a pixel of one sample) makes mse -inf: nothing is
  * resolved. */
