@@ -13,6 +13,7 @@
 #include "bench/experiments/experiments.h"
 #include "cli_util.h"
 #include "closed_form.h"
+#include "bench/report/image.h"
 
 static void nolog(void *ctx, const char *m)
 {
@@ -273,6 +274,58 @@ Test(experiments, furnace_and_formfactors_quick_forms_hold_their_claims, .timeou
     }
     cr_expect_gt(checked, 0);
     free(csv);
+    char cmd[128];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", root);
+    cr_expect_eq(system(cmd), 0);
+}
+
+/* discontinuity: at each element count asked, Gauss-Seidel's surface error
+ * on the discontinuity mesh is below the uniform mesh's on both scenes
+ * (against each scene's path-traced reference), and the mesh overlays are
+ * images of the camera's size with element boundaries drawn in yellow. */
+Test(experiments, discontinuity_quick_form_holds_its_claim, .timeout = 900)
+{
+    char root[64], cache[96];
+    snprintf(root, sizeof root, "/tmp/rp_exp_XXXXXX");
+    cr_assert_not_null(mkdtemp(root));
+    snprintf(cache, sizeof cache, "%s/refs", root);
+    run_quick("discontinuity", root, cache);
+    char *csv = read_out(root, "discontinuity", "discontinuity.csv");
+    static const char *const scenes[2] = {"cornell", "original"};
+    static const char *const targets[2] = {"250", "1000"};
+    for (int s = 0; s < 2; s++)
+        for (int c = 0; c < 2; c++) {
+            double err[2] = {NAN, NAN};
+            for (int m = 0; m < 2; m++) {
+                char key[96];
+                snprintf(key, sizeof key, "\n%s,%s,%s,", scenes[s], m ? "discontinuity" : "uniform", targets[c]);
+                const char *hit = strstr(csv, key);
+                cr_assert_not_null(hit, "%s missing", key + 1);
+                err[m] = field(hit + 1, 6);
+            }
+            cr_expect(err[1] < err[0], "%s at %s elements: discontinuity %g, uniform %g", scenes[s], targets[c], err[1],
+                      err[0]);
+        }
+    free(csv);
+    for (int s = 0; s < 2; s++)
+        for (int m = 0; m < 2; m++) {
+            char path[256];
+            snprintf(path, sizeof path, "%s/discontinuity/mesh-%s-%s.png", root, scenes[s],
+                     m ? "discontinuity" : "uniform");
+            uint32_t w, h;
+            size_t ch;
+            uint16_t *px = NULL;
+            rp_error e;
+            cr_assert_eq(rp_image_read_png(path, &w, &h, &ch, &px, &e), RP_OK, "%s", e.message);
+            cr_expect(w == 256 && h == 256 && ch == 3, "%s: %u x %u x %zu", path, w, h, ch);
+            size_t yellow = 0;
+            for (size_t i = 0; i < (size_t)w * h; i++)
+                yellow += px[i * ch] == 255 && px[i * ch + 1] == 255 && px[i * ch + 2] == 0;
+            /* at 1000 elements the boundaries cover a few percent of the
+             * image at least */
+            cr_expect(yellow > (size_t)w * h / 50, "%s: %zu yellow pixels", path, yellow);
+            free(px);
+        }
     char cmd[128];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", root);
     cr_expect_eq(system(cmd), 0);

@@ -96,6 +96,7 @@ rp_status rp_exp_samplers(const rp_experiment_params *p, rp_error *err);
 rp_status rp_exp_furnace(const rp_experiment_params *p, rp_error *err);
 rp_status rp_exp_formfactors(const rp_experiment_params *p, rp_error *err);
 rp_status rp_exp_meshing(const rp_experiment_params *p, rp_error *err);
+rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err);
 rp_status rp_exp_progressive(const rp_experiment_params *p, rp_error *err);
 rp_status rp_exp_hierarchy(const rp_experiment_params *p, rp_error *err);
 

@@ -1,0 +1,330 @@
+/* radpt experiment discontinuity: where the elements go.
+ *
+ * Gauss-Seidel radiosity on uniform meshes and on discontinuity meshes
+ * (elements that follow contact lines and the umbra and penumbra
+ * boundaries of the lights: Heckbert 1992, "Discontinuity meshing for
+ * radiosity"; Lischinski, Tampieri & Greenberg 1992) at equal element
+ * counts, and hierarchical radiosity (refined where B x F asks: Hanrahan,
+ * Salzman & Aupperle 1991), on the Cornell box and on McGuire's
+ * CornellBox-Original (two boxes standing on the floor: contact shadows),
+ * each scored against its path-traced reference.  Images are flat
+ * (element values) or Gouraud (values interpolated from the vertices: a
+ * linear reconstruction of the constant solution, not a linear Galerkin
+ * basis, which radpt does not have yet).  The meshes at the middle count
+ * are drawn over the reference (wireframe.h). */
+#include "bench/experiments/exp_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "bench/report/files.h"
+#include "bench/report/wireframe.h"
+#include "bench/run/journal.h"
+#include "geometry/mesh.h"
+
+#define DC_SCENES 2
+#define DC_MODES 2
+#define DC_MAXCOUNTS 3
+
+static const char *const dc_scene_file[DC_SCENES] = {"cornell.scene", "real/CornellBox-Original.obj"};
+static const char *const dc_scene_id[DC_SCENES] = {"cornell", "original"};
+static const char *const dc_mode[DC_MODES] = {"uniform", "discontinuity"};
+static const char *const dc_recon[2] = {"flat", "gouraud"};
+
+typedef struct dc_row {
+    size_t elements;
+    double rmse[2];     /* flat, gouraud */
+    double surface_err; /* the same for both reconstructions */
+    double seconds;     /* the flat run's solver time */
+    int converged;
+} dc_row;
+
+typedef struct dc_scene {
+    rp_exp_start x;
+    rp_reference *ref;
+    dc_row rows[DC_MODES][DC_MAXCOUNTS];
+    double hr_rmse, hr_surface_err, hr_seconds;
+} dc_scene;
+
+/* One run of spec to its rule (or the budget), read back from the journal
+ * when recorded: v = rmse, surface_err, seconds, converged. */
+static rp_status dc_unit(const rp_experiment_params *p, dc_scene *s, const char *id, const char *spec, double budget,
+                         double v[4], rp_error *err)
+{
+    char key[256];
+    snprintf(key, sizeof key, "discontinuity %s %s budget %.17g", id, spec, budget);
+    if (rp_exp_unit(p, key, v, 4))
+        return RP_OK;
+    if (rp_cancelled(p->cancel))
+        return rp_error_set(err, RP_ERR_INTERRUPTED, "interrupted");
+    rp_method_spec m;
+    rp_status st = rp_method_spec_parse(spec, &m, err);
+    if (st != RP_OK)
+        return st;
+    rp_exp_log(p, "discontinuity: %s on %s", spec, s->x.path);
+    rp_harness_params hp = {.size = sizeof hp, .budget = budget, .levels = 1, .threads = p->threads,
+                            .stop_when_converged = 1, .progress = p->progress, .progress_ctx = p->progress_ctx,
+                            .cancel = p->cancel};
+    rp_trial run;
+    if ((st = rp_harness_run(s->x.scene, s->ref, &m, 1, &hp, &run, err)) != RP_OK)
+        return st;
+    if (run.status != RP_OK)
+        st = rp_error_set(err, run.status, "%s: %s", spec, run.error);
+    else if (!run.ncp)
+        st = rp_error_set(err, RP_ERR_RUNTIME, "%s: no result within the budget", spec);
+    else {
+        const rp_checkpoint *cp = &run.cp[run.ncp - 1];
+        v[0] = cp->rmse;
+        v[1] = cp->surface_err;
+        v[2] = cp->wall_s;
+        v[3] = cp->converged;
+        st = rp_journal_put_doubles(p->journal, key, v, 4, err);
+        rp_exp_log(p, "  RMSE %.4g, surface error %.4g (%.2f s)", cp->rmse, cp->surface_err, cp->wall_s);
+    }
+    rp_trial_free(&run);
+    return st;
+}
+
+/* The scene's mesh of mode at count elements, drawn over its reference. */
+static rp_status dc_overlay(const rp_experiment_params *p, const dc_scene *s, int mode, unsigned count,
+                            const char *file, rp_error *err)
+{
+    rp_mesh_params mp = {.size = sizeof mp, .target_count = count, .mode = mode ? RP_MESH_DISCONTINUITY : 0};
+    rp_mesh *mesh = NULL;
+    rp_status st = rp_mesh_create(s->x.scene, &mp, &mesh, err);
+    if (st != RP_OK)
+        return st;
+    const rp_reference *r = s->ref;
+    size_t npix = (size_t)r->width * r->height;
+    float *planes[3] = {NULL, NULL, NULL};
+    int have = r->radiance && r->nbands == 3;
+    for (int c = 0; have && c < 3; c++)
+        if (!(planes[c] = malloc(npix * sizeof(float))))
+            have = 0;
+    for (size_t i = 0; have && i < npix; i++)
+        for (int c = 0; c < 3; c++)
+            planes[c][i] = r->radiance[i * 3 + c];
+    char path[1024];
+    st = rp_wireframe_png(rp_path_join(path, sizeof path, p->out_dir, file), s->x.scene, mesh,
+                          have ? (const float *const *)planes : NULL, NULL, err);
+    for (int c = 0; c < 3; c++)
+        free(planes[c]);
+    rp_mesh_destroy(mesh);
+    return st;
+}
+
+static rp_status dc_write(const rp_experiment_params *p, dc_scene *sc, const unsigned *counts, size_t nc,
+                          rp_error *err)
+{
+    char path[1024];
+    rp_out o;
+    rp_status st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "discontinuity.csv"), err);
+    if (st != RP_OK)
+        return st;
+    fputs("scene,mesh,target_elements,elements,rmse_flat,rmse_gouraud,surface_err,seconds,converged\n", o.f);
+    for (int s = 0; s < DC_SCENES; s++) {
+        for (int m = 0; m < DC_MODES; m++)
+            for (size_t c = 0; c < nc; c++) {
+                const dc_row *w = &sc[s].rows[m][c];
+                fprintf(o.f, "%s,%s,%u,%zu,", dc_scene_id[s], dc_mode[m], counts[c], w->elements);
+                double v[4] = {w->rmse[0], w->rmse[1], w->surface_err, w->seconds};
+                for (int k = 0; k < 4; k++) {
+                    rp_exp_fnum(o.f, v[k]);
+                    fputc(',', o.f);
+                }
+                fprintf(o.f, "%d\n", w->converged);
+            }
+        fprintf(o.f, "%s,hierarchical,,,", dc_scene_id[s]);
+        double v[4] = {NAN, sc[s].hr_rmse, sc[s].hr_surface_err, sc[s].hr_seconds};
+        for (int k = 0; k < 4; k++) {
+            rp_exp_fnum(o.f, v[k]);
+            fputc(',', o.f);
+        }
+        fputs("1\n", o.f);
+    }
+    if ((st = rp_out_close(&o, 1, err)) != RP_OK)
+        return st;
+    /* gnuplot data, one block per scene and mesh: elements, rmse_flat,
+     * rmse_gouraud, surface_err, seconds; then hierarchical's point */
+    if ((st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "discontinuity.dat"), err)) != RP_OK)
+        return st;
+    for (int s = 0; s < DC_SCENES; s++) {
+        for (int m = 0; m < DC_MODES; m++) {
+            fprintf(o.f, "# %s %s\n", dc_scene_id[s], dc_mode[m]);
+            for (size_t c = 0; c < nc; c++) {
+                const dc_row *w = &sc[s].rows[m][c];
+                fprintf(o.f, "%zu ", w->elements);
+                double v[4] = {w->rmse[0], w->rmse[1], w->surface_err, w->seconds};
+                for (int k = 0; k < 4; k++) {
+                    rp_exp_dnum(o.f, v[k]);
+                    fputc(k < 3 ? ' ' : '\n', o.f);
+                }
+            }
+            fputs("\n\n", o.f);
+        }
+        fprintf(o.f, "# %s hierarchical\n? ", dc_scene_id[s]);
+        double v[4] = {sc[s].hr_rmse, sc[s].hr_rmse, sc[s].hr_surface_err, sc[s].hr_seconds};
+        for (int k = 0; k < 4; k++) {
+            rp_exp_dnum(o.f, v[k]);
+            fputc(k < 3 ? ' ' : '\n', o.f);
+        }
+        fputs("\n\n", o.f);
+    }
+    return rp_out_close(&o, 1, err);
+}
+
+rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
+{
+    static const unsigned counts_full[] = {250, 1000, 4000};
+    static const unsigned counts_quick[] = {250, 1000};
+    const unsigned *counts = p->quick ? counts_quick : counts_full;
+    const size_t nc = p->quick ? 2 : 3, mid = 1;
+    dc_scene *sc = calloc(DC_SCENES, sizeof *sc);
+    if (!sc)
+        return rp_error_set(err, RP_ERR_NOMEM, "out of memory");
+    rp_status st = RP_OK;
+    for (int s = 0; s < DC_SCENES && st == RP_OK; s++) {
+        if ((st = rp_exp_begin(p, dc_scene_file[s], &sc[s].x, err)) != RP_OK)
+            break;
+        rp_reference_params rp = rp_exp_ref_params(p, sc[s].x.set.reference_spp);
+        st = rp_reference_get(sc[s].x.scene, sc[s].x.path, &rp, &sc[s].ref, err);
+    }
+    /* Gauss-Seidel stops at its tolerance (budget: a cap); hierarchical
+     * refines until its budget: 4 s (quick) or 20 s, as in the cornell and
+     * hierarchy experiments */
+    const double budget = sc[0].x.set.budget, hr_budget = p->quick ? 4 : 20;
+    for (int s = 0; s < DC_SCENES && st == RP_OK; s++) {
+        for (int m = 0; m < DC_MODES && st == RP_OK; m++)
+            for (size_t c = 0; c < nc && st == RP_OK; c++) {
+                dc_row *w = &sc[s].rows[m][c];
+                rp_mesh_params mp = {.size = sizeof mp, .target_count = counts[c],
+                                     .mode = m ? RP_MESH_DISCONTINUITY : RP_MESH_UNIFORM};
+                rp_mesh *mesh = NULL;
+                if ((st = rp_mesh_create(sc[s].x.scene, &mp, &mesh, err)) != RP_OK)
+                    break;
+                w->elements = rp_mesh_nelements(mesh);
+                rp_mesh_destroy(mesh);
+                for (int r = 0; r < 2 && st == RP_OK; r++) {
+                    char spec[160];
+                    snprintf(spec, sizeof spec, "gauss-seidel:elements=%u:mesh=%s:tolerance=1e-5:reconstruct=%s",
+                             counts[c], dc_mode[m], dc_recon[r]);
+                    double v[4];
+                    if ((st = dc_unit(p, &sc[s], dc_scene_id[s], spec, budget, v, err)) != RP_OK)
+                        break;
+                    w->rmse[r] = v[0];
+                    if (r == 0) {
+                        w->surface_err = v[1];
+                        w->seconds = v[2];
+                        w->converged = (int)v[3];
+                    }
+                }
+            }
+        double v[4];
+        if (st == RP_OK && (st = dc_unit(p, &sc[s], dc_scene_id[s], "hierarchical", hr_budget, v, err)) == RP_OK) {
+            sc[s].hr_rmse = v[0];
+            sc[s].hr_surface_err = v[1];
+            sc[s].hr_seconds = v[2];
+        }
+    }
+    if (st == RP_OK && rp_exp_handing_out(p))
+        goto done;
+    if (st == RP_OK)
+        st = rp_mkdirs(p->out_dir, err);
+    if (st == RP_OK)
+        st = dc_write(p, sc, counts, nc, err);
+    for (int s = 0; s < DC_SCENES && st == RP_OK; s++)
+        for (int m = 0; m < DC_MODES && st == RP_OK; m++) {
+            char file[96];
+            snprintf(file, sizeof file, "mesh-%s-%s.png", dc_scene_id[s], dc_mode[m]);
+            st = dc_overlay(p, &sc[s], m, counts[mid], file, err);
+        }
+    char note[256] = "";
+    if (st == RP_OK) {
+        char body[4096];
+        snprintf(body, sizeof body,
+                 "\n@PNG\nset output 'discontinuity.png'\nset logscale xy\nset format y '%%g'\n"
+                 "set xlabel 'elements'\nset ylabel 'surface-average relative error (RMS)'\n"
+                 "set title 'Gauss-Seidel at convergence: uniform and discontinuity meshes'\n"
+                 "set key outside right\n"
+                 "plot 'discontinuity.dat' index 0 using 1:4 with linespoints lw 2 pt 7 title 'Cornell, uniform', "
+                 "'' index 1 using 1:4 with linespoints lw 2 pt 7 title 'Cornell, discontinuity', "
+                 "'' index 3 using 1:4 with linespoints lw 2 pt 5 title 'Original, uniform', "
+                 "'' index 4 using 1:4 with linespoints lw 2 pt 5 title 'Original, discontinuity'\n"
+                 "@SVG\nset output 'discontinuity.svg'\nreplot\n"
+                 "@PNG\nset output 'discontinuity_time.png'\nset xlabel 'solver wall time (s)'\n"
+                 "set title 'Error against time (hierarchical: adaptive refinement)'\n"
+                 "plot 'discontinuity.dat' index 0 using 5:4 with linespoints lw 2 pt 7 title 'Cornell, uniform', "
+                 "'' index 1 using 5:4 with linespoints lw 2 pt 7 title 'Cornell, discontinuity', "
+                 "'' index 2 using 5:4 with points pt 9 ps 2 title 'Cornell, hierarchical', "
+                 "'' index 3 using 5:4 with linespoints lw 2 pt 5 title 'Original, uniform', "
+                 "'' index 4 using 5:4 with linespoints lw 2 pt 5 title 'Original, discontinuity', "
+                 "'' index 5 using 5:4 with points pt 11 ps 2 title 'Original, hierarchical'\n"
+                 "@SVG\nset output 'discontinuity_time.svg'\nreplot\nunset output\n");
+        st = rp_exp_draw(p, body, note, sizeof note, err);
+    }
+    rp_out o;
+    char path[1024];
+    if (st == RP_OK && (st = rp_out_open(&o, rp_path_join(path, sizeof path, p->out_dir, "report.md"), err)) == RP_OK) {
+        FILE *f = o.f;
+        fprintf(f, "# Experiment discontinuity: where the elements go\n\n"
+                   "Gauss-Seidel radiosity run to a relative residual of 1e-5 on uniform meshes (a regular grid per "
+                   "face) and on discontinuity meshes (triangles whose edges follow the lines where surfaces touch, "
+                   "D0, and the umbra and penumbra boundaries of the lights, D1: Heckbert 1992; Lischinski, "
+                   "Tampieri & Greenberg 1992) at about the same element counts (the table lists those made), and "
+                   "hierarchical radiosity with its defaults for %g s (elements split where B x F asks: adaptive). "
+                   "Scenes: the Cornell box (`%s`) and "
+                   "McGuire's CornellBox-Original (`%s`, two boxes standing on the floor). Each is scored against "
+                   "its path-traced reference (surface error: RMS relative error of the surface averages; image "
+                   "RMSE over the measured pixels). Images are flat (element values) or Gouraud (vertex values "
+                   "interpolated: a linear reconstruction of the constant solution, not a linear basis).\n\n",
+                hr_budget, sc[0].x.path, sc[1].x.path);
+        if (p->command)
+            fprintf(f, "Command: `%s`\n\n", p->command);
+        for (int s = 0; s < DC_SCENES; s++)
+            fprintf(f, "Reference for %s: `%s` (RMSE standard error %.3g, surface averages' RMS relative standard "
+                       "error %.3g).\n\n",
+                    dc_scene_id[s], sc[s].ref->exr_path, sc[s].ref->rmse_se, sc[s].ref->surface_rel_se);
+        if (!note[0])
+            fprintf(f, "![surface error against elements](discontinuity.png)\n\n"
+                       "![surface error against time](discontinuity_time.png)\n\n");
+        else
+            fprintf(f, "**Note:** %s\n\n", note);
+        fprintf(f, "| scene | mesh | elements | surface error | RMSE flat | RMSE Gouraud | seconds |\n"
+                   "|---|---|---|---|---|---|---|\n");
+        int holds = 1;
+        for (int s = 0; s < DC_SCENES; s++) {
+            for (int m = 0; m < DC_MODES; m++)
+                for (size_t c = 0; c < nc; c++) {
+                    const dc_row *w = &sc[s].rows[m][c];
+                    fprintf(f, "| %s | %s | %zu | %.4g | %.4g | %.4g | %.3g |\n", dc_scene_id[s], dc_mode[m],
+                            w->elements, w->surface_err, w->rmse[0], w->rmse[1], w->seconds);
+                }
+            fprintf(f, "| %s | hierarchical | | %.4g | | %.4g | %.3g |\n", dc_scene_id[s], sc[s].hr_surface_err,
+                    sc[s].hr_rmse, sc[s].hr_seconds);
+            for (size_t c = 0; c < nc; c++)
+                holds &= sc[s].rows[1][c].surface_err < sc[s].rows[0][c].surface_err;
+        }
+        fprintf(f, "\nClaim: at the same element count asked the discontinuity mesh's surface error is below the uniform "
+                   "mesh's on both scenes: **%s** in these runs.\n\n",
+                holds ? "holds" : "does not hold");
+        fprintf(f, "Meshes at %u elements over the reference (element boundaries in yellow):\n\n", counts[mid]);
+        for (int s = 0; s < DC_SCENES; s++)
+            fprintf(f, "| uniform | discontinuity |\n|---|---|\n| ![](mesh-%s-uniform.png) | "
+                       "![](mesh-%s-discontinuity.png) |\n\n",
+                    dc_scene_id[s], dc_scene_id[s]);
+        fprintf(f, "Columns of discontinuity.csv: scene; mesh (uniform, discontinuity, or hierarchical); "
+                   "target_elements (asked); elements (made); rmse_flat, rmse_gouraud (W sr^-1 m^-2); surface_err; "
+                   "seconds (solver time of the flat run); converged. Hierarchical's image is its own "
+                   "vertex reconstruction (rmse_gouraud column).\n");
+        st = rp_out_close(&o, 1, err);
+    }
+done:
+    for (int s = 0; s < DC_SCENES; s++) {
+        rp_reference_destroy(sc[s].ref);
+        rp_scene_destroy(sc[s].x.scene);
+    }
+    free(sc);
+    return st;
+}
