@@ -764,6 +764,17 @@ rp_status rp_mesh_build_disc(rp_mesh *mesh, const rp_scene *scene, const rp_mesh
                 c.snaps[c.nsnaps].t = w->wid[4 * f + e] == w->ue_a[u] ? s : 1 - s;
                 c.nsnaps++;
             }
+            /* split_t_junctions may have used the room the faces before
+             * this one left */
+            if (ns == segcap) {
+                fseg *ng = realloc(c.segs, 2 * segcap * sizeof *ng);
+                if (!ng) {
+                    st = rp_error_set(err, RP_ERR_NOMEM, "mesh: out of memory");
+                    goto done;
+                }
+                c.segs = ng;
+                segcap *= 2;
+            }
             c.segs[ns++] = g;
         }
         d->nseg = ns - d->seg0;

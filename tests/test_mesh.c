@@ -911,6 +911,30 @@ Test(discontinuity, cornell_box)
     rp_scene_destroy(s);
 }
 
+/* McGuire's published boxes, whose traces meet in many T-junctions (the
+ * junction splits once overran the segment array on CornellBox-Sphere:
+ * heap corruption, found by a reviewer under AddressSanitizer): every
+ * face's elements fill it, conform and straddle no segment. */
+Test(discontinuity, published_boxes)
+{
+    static const char *const files[] = {"scenes/real/CornellBox-Sphere.obj", "scenes/real/CornellBox-Original.obj"};
+    for (size_t k = 0; k < 2; k++) {
+        rp_scene *s = rp_test_load(files[k]);
+        rp_disc_segment *seg = NULL;
+        size_t n = 0;
+        rp_error err = {""};
+        cr_assert_eq(rp_disc_find(s, NULL, &seg, &n, &err), RP_OK, "%s: %s", files[k], err.message);
+        rp_mesh *m = make_disc_mesh(s, 1000);
+        check_disc_areas(s, m);
+        check_elements(m);
+        check_conformity(s, m, NULL);
+        check_no_straddle(s, m, seg, n);
+        free(seg);
+        rp_mesh_destroy(m);
+        rp_scene_destroy(s);
+    }
+}
+
 Test(discontinuity, bad_mode_and_old_size)
 {
     rp_scene *s = rp_test_parse(DISC_BOX_SCENE);
