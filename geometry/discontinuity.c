@@ -32,8 +32,6 @@
 /* A wedge's trace is cut where t passes this (the occluder point near the
  * source's level projects to infinity). */
 #define DISC_MAX_T 1e4
-/* Bounded work: (wedge, receiver) pairs traced in a scene. */
-#define DISC_MAX_PAIRS 4000000UL
 
 typedef struct frame2 {
     rp_vec3 o, t, b, n;
@@ -389,7 +387,7 @@ static int by_x(const void *pa, const void *pb)
 }
 
 static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, double eta, seg_list *out,
-                   rp_error *err)
+                   unsigned long max_pairs, int *truncated, rp_error *err)
 {
     const size_t nf = rp_scene_nfaces(scene);
     const rp_face *F = rp_scene_faces(scene);
@@ -500,8 +498,10 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
                 for (size_t r = 0; r < nf; r++) {
                     if (!recv[r] || r == l || r == E->f0 || r == E->f1)
                         continue;
-                    if (++pairs > DISC_MAX_PAIRS)
+                    if (++pairs > max_pairs) {
+                        *truncated = 1;
                         goto out_of_budget;
+                    }
                     if (trace_wedge(scene, rc, &frames[r], (uint32_t)r, &w, tol, eta, out))
                         goto done;
                 }
@@ -520,15 +520,17 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
                         continue;
                     if (fabs(rp_v3_dot(frames[r].n, rp_v3_sub(p, frames[r].o))) <= tol)
                         continue; /* the vertex lies on the receiver */
-                    if (++pairs > DISC_MAX_PAIRS)
+                    if (++pairs > max_pairs) {
+                        *truncated = 1;
                         goto out_of_budget;
+                    }
                     if (trace_wedge(scene, rc, &frames[r], (uint32_t)r, &w, tol, eta, out))
                         goto done;
                 }
             }
         }
     }
-out_of_budget:
+out_of_budget: /* also the end of the loops */
     ret = 0;
 done:
     if (ret == -1)
@@ -633,7 +635,7 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
         return rp_error_set(err, RP_ERR_INPUT, "discontinuity: no scene or no output");
     *out = NULL;
     *count = 0;
-    rp_disc_params p = {sizeof p, RP_DISC_DEFAULT_MAX_PER_FACE, 0, 0};
+    rp_disc_params p = {.size = sizeof p, .max_per_face = RP_DISC_DEFAULT_MAX_PER_FACE};
     if (params) {
         if (params->size != sizeof *params)
             return rp_error_set(err, RP_ERR_INPUT, "discontinuity: params.size %zu is not %zu", params->size,
@@ -642,6 +644,8 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
         if (p.max_per_face == 0)
             p.max_per_face = RP_DISC_DEFAULT_MAX_PER_FACE;
     }
+    if (p.truncated)
+        *p.truncated = 0;
     const size_t nf = rp_scene_nfaces(scene);
     const double diag = rp_disc_scale(scene);
     const double tol = RP_DISC_REL_TOL * diag;
@@ -659,7 +663,11 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
         return rp_error_set(err, RP_ERR_NOMEM, "discontinuity: out of memory");
     }
     if (!p.no_d1) {
-        int r = find_d1(scene, frames, tol, eta, &l, err);
+        int truncated = 0;
+        int r = find_d1(scene, frames, tol, eta, &l, p.max_pairs ? p.max_pairs : RP_DISC_MAX_PAIRS, &truncated,
+                        err);
+        if (p.truncated)
+            *p.truncated = truncated;
         if (r) {
             free(frames);
             free(l.s);

@@ -61,7 +61,16 @@ typedef struct rp_disc_params {
     size_t size;          /* sizeof(rp_disc_params) */
     size_t max_per_face;  /* D1 segments kept per face; 0: RP_DISC_DEFAULT_MAX_PER_FACE */
     int no_d0, no_d1;     /* leave a kind out */
+    unsigned long max_pairs; /* (wedge, receiving face) pairs traced at most;
+                                0: RP_DISC_MAX_PAIRS */
+    int *truncated;       /* out, may be NULL: 1 when D1 tracing stopped at
+                             max_pairs (some boundaries missing), else 0 */
 } rp_disc_params;
+
+/* Bounded work: (wedge, receiving face) pairs traced in a scene; past it
+ * the D1 boundaries of the remaining lights and occluders are not traced
+ * (rp_disc_params.truncated says so). */
+#define RP_DISC_MAX_PAIRS 4000000UL
 
 /* The length tolerances are relative to: the diagonal of the bounding box
  * of the faces that reflect or emit in some band (of all faces if none). */

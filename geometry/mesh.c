@@ -942,6 +942,7 @@ void rp_mesh_destroy(rp_mesh *mesh)
 }
 
 size_t rp_mesh_nelements(const rp_mesh *mesh) { return mesh->nelements; }
+int rp_mesh_disc_truncated(const rp_mesh *mesh) { return mesh->disc_truncated; }
 const rp_element *rp_mesh_elements(const rp_mesh *mesh) { return mesh->elements; }
 size_t rp_mesh_nvertices(const rp_mesh *mesh) { return mesh->nvertices; }
 const rp_vec3 *rp_mesh_vertices(const rp_mesh *mesh) { return mesh->vertices; }

@@ -81,6 +81,10 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params,
 void rp_mesh_destroy(rp_mesh *mesh);
 
 size_t rp_mesh_nelements(const rp_mesh *mesh);
+/* 1 when a discontinuity mesh's shadow-boundary (D1) tracing stopped at its
+ * work cap (RP_DISC_MAX_PAIRS in discontinuity.h): some boundaries are
+ * missing from the mesh.  0 otherwise, and for a uniform mesh. */
+int rp_mesh_disc_truncated(const rp_mesh *mesh);
 const rp_element *rp_mesh_elements(const rp_mesh *mesh);
 size_t rp_mesh_nvertices(const rp_mesh *mesh);
 const rp_vec3 *rp_mesh_vertices(const rp_mesh *mesh);

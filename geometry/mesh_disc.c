@@ -683,7 +683,7 @@ rp_status rp_mesh_build_disc(rp_mesh *mesh, const rp_scene *scene, const rp_mesh
     size_t nds = 0;
     ctx c = {scene, w, mesh->faces, nf, NULL, NULL, NULL, 0, NULL, RP_DISC_REL_TOL * rp_disc_scale(scene)};
     built best = {0}, cur = {0};
-    rp_disc_params dp = {sizeof dp, max_per_face, 0, 0};
+    rp_disc_params dp = {.size = sizeof dp, .max_per_face = max_per_face, .truncated = &mesh->disc_truncated};
     if ((st = rp_disc_find(scene, &dp, &ds, &nds, err)) != RP_OK)
         return st;
     c.df = calloc(nf + 1, sizeof *c.df);

@@ -39,6 +39,7 @@ struct rp_mesh {
     uint32_t *surf_first, *surf_count;
     double max_edge;      /* the edge length the subdivision used */
     size_t nconstraints;  /* discontinuity mesh: segments it conforms to */
+    int disc_truncated;   /* discontinuity mesh: D1 tracing hit its work cap */
 };
 
 /* What the discontinuity mesher needs of rp_mesh_create's welding: the

@@ -935,6 +935,30 @@ Test(discontinuity, published_boxes)
     }
 }
 
+/* The work cap: on the Cornell box, a cap of 100 (wedge, face) pairs stops
+ * the D1 tracing (reported, and fewer D1 segments come out); the default
+ * cap does not. */
+Test(discontinuity, work_cap_is_reported)
+{
+    rp_scene *s = rp_test_load("scenes/cornell.scene");
+    size_t nd1[2] = {0, 0};
+    int cut[2] = {-1, -1};
+    for (int k = 0; k < 2; k++) {
+        rp_disc_params p = {.size = sizeof p, .max_pairs = k ? 100 : 0, .truncated = &cut[k]};
+        rp_disc_segment *seg = NULL;
+        size_t n = 0;
+        rp_error err = {""};
+        cr_assert_eq(rp_disc_find(s, &p, &seg, &n, &err), RP_OK, "%s", err.message);
+        for (size_t i = 0; i < n; i++)
+            nd1[k] += seg[i].kind != RP_DISC_D0;
+        free(seg);
+    }
+    cr_expect_eq(cut[0], 0);
+    cr_expect_eq(cut[1], 1);
+    cr_expect(nd1[1] < nd1[0], "D1 segments: %zu with the cap of 100, %zu without", nd1[1], nd1[0]);
+    rp_scene_destroy(s);
+}
+
 Test(discontinuity, bad_mode_and_old_size)
 {
     rp_scene *s = rp_test_parse(DISC_BOX_SCENE);

@@ -59,9 +59,11 @@
 #include <math.h>
 #include <stddef.h>
 #include <omp.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../geometry/discontinuity.h"
 #include "../../geometry/mesh.h"
 #include "../../geometry/raycast.h"
 #include "../../geometry/scene.h"
@@ -265,6 +267,15 @@ static rp_status sj_init_local(void *state, const rp_scene *scene, const rp_opti
 
     if ((st = rp_mesh_create(scene, &mp, &s->mesh, err)) != RP_OK)
         return st;
+    if (rp_mesh_disc_truncated(s->mesh) && o && o->log) {
+        char msg[320];
+        snprintf(msg, sizeof msg,
+                 "warning: stochastic-jacobi: the discontinuity mesh traced its cap of %lu (wedge, receiving face) "
+                 "pairs and stopped: the shadow boundaries (D1) of the remaining lights and occluders are not in "
+                 "the mesh",
+                 RP_DISC_MAX_PAIRS);
+        o->log(o->log_ctx, msg);
+    }
     s->n = rp_mesh_nelements(s->mesh);
     s->nv = rp_mesh_nvertices(s->mesh);
     if (s->n == 0)

@@ -244,6 +244,10 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
 
     if ((st = rp_mesh_create(scene, &mp, &s->mesh, err)) != RP_OK)
         return st;
+    if (rp_mesh_disc_truncated(s->mesh))
+        rp_rad_log(s, "warning: %s: the discontinuity mesh traced its cap of %lu (wedge, receiving face) pairs and "
+                   "stopped: the shadow boundaries (D1) of the remaining lights and occluders are not in the mesh",
+                   cfg->name, RP_DISC_MAX_PAIRS);
     if (rp_cancelled(s->cancel))
         return rp_error_set(err, RP_ERR_INTERRUPTED, "%s: interrupted while meshing", cfg->name);
     s->n = rp_mesh_nelements(s->mesh);
