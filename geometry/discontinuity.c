@@ -676,7 +676,8 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
     }
     free(frames);
     /* Per face: merge, then keep the D0 segments and the longest D1 ones. */
-    qsort(l.s, l.n, sizeof *l.s, by_face);
+    if (l.n) /* (l.s is NULL when nothing was found) */
+        qsort(l.s, l.n, sizeof *l.s, by_face);
     size_t w = 0;
     for (size_t i = 0; i < l.n;) {
         size_t j = i;
