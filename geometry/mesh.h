@@ -1,11 +1,15 @@
-/* Elements for finite-element radiosity: every face of every surface is
- * subdivided into a regular grid of elements (quads into n x m quads,
- * triangles into k^2 triangles).  Edge subdivision counts are chosen per
- * class of edges that must agree (opposite sides of a quad, all sides of a
- * triangle, edges shared by two faces of one surface), so the mesh is
- * conforming inside each surface: no T-vertices.  Vertices are shared
- * between the elements of a surface and adjacency is recorded, so a solver
- * can average element values to vertices and interpolate (Gouraud). */
+/* Elements for finite-element radiosity.  The uniform mesh subdivides
+ * every face of every surface into a regular grid of elements (quads into
+ * n x m quads, triangles into k^2 triangles).  Edge subdivision counts are
+ * chosen per class of edges that must agree (opposite sides of a quad, all
+ * sides of a triangle, edges shared by two faces of one surface), so the
+ * mesh is conforming inside each surface: no T-vertices.  The
+ * discontinuity mesh (RP_MESH_DISCONTINUITY, mesh_disc.c) cuts the faces
+ * that reflect or emit into triangles whose edges follow contact lines and
+ * shadow boundaries, and keeps the same sharing of a surface's edge
+ * vertices.  Either way vertices are shared between the elements of a
+ * surface and adjacency is recorded, so a solver can average element
+ * values to vertices and interpolate (Gouraud). */
 #ifndef RP_MESH_H
 #define RP_MESH_H
 
@@ -102,7 +106,9 @@ void rp_mesh_neighbors(const rp_mesh *mesh, uint32_t e, uint32_t out[4]);
 const uint32_t *rp_mesh_vertex_elements(const rp_mesh *mesh, uint32_t v, size_t *count);
 
 /* The element of a face that contains point p (a point on the face,
- * e.g. a ray hit).  Constant time: inverts the face's grid. */
+ * e.g. a ray hit).  A grid face: constant time, inverting the grid; a
+ * triangulated face: a bucket grid over its elements (a scan of the face's
+ * elements where no bucket holds p). */
 uint32_t rp_mesh_locate(const rp_mesh *mesh, uint32_t face, rp_vec3 p);
 
 /* Barycentric weights of p among the element's vertices (3 or 4 weights,
