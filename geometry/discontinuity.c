@@ -25,6 +25,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mesh_internal.h"
 #include "raycast.h"
 
 /* Pieces of a trace tested for visibility (discontinuity.h). */
@@ -353,26 +354,6 @@ static int trace_wedge(const rp_scene *scene, const rp_raycast *rc, const frame2
     return 0;
 }
 
-/* Union-find over vertices; the smaller index is the root. */
-static uint32_t weld_find(uint32_t *parent, uint32_t x)
-{
-    while (parent[x] != x) {
-        parent[x] = parent[parent[x]];
-        x = parent[x];
-    }
-    return x;
-}
-
-static void weld_union(uint32_t *parent, uint32_t a, uint32_t b)
-{
-    a = weld_find(parent, a);
-    b = weld_find(parent, b);
-    if (a < b)
-        parent[b] = a;
-    else if (b < a)
-        parent[a] = b;
-}
-
 typedef struct xkey {
     double x;
     uint32_t i;
@@ -429,9 +410,9 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
     for (size_t i = 0; i < nvs; i++)
         for (size_t j = i + 1; j < nvs && order[j].x - order[i].x <= tol; j++)
             if (rp_v3_length(rp_v3_sub(V[order[i].i], V[order[j].i])) <= tol)
-                weld_union(wid, order[i].i, order[j].i);
+                rp_uf_union(wid, order[i].i, order[j].i);
     for (size_t i = 0; i < nvs; i++)
-        wid[i] = weld_find(wid, (uint32_t)i);
+        wid[i] = rp_uf_find(wid, (uint32_t)i);
     /* The front normals of the faces around each welded vertex. */
     for (size_t f = 0; f < nf; f++)
         for (uint32_t i = 0; i < F[f].nverts; i++)

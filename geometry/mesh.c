@@ -46,7 +46,7 @@
 
 /* ---- union-find ------------------------------------------------------ */
 
-static uint32_t uf_find(uint32_t *parent, uint32_t x)
+uint32_t rp_uf_find(uint32_t *parent, uint32_t x)
 {
     while (parent[x] != x) {
         parent[x] = parent[parent[x]];
@@ -55,10 +55,10 @@ static uint32_t uf_find(uint32_t *parent, uint32_t x)
     return x;
 }
 
-static void uf_union(uint32_t *parent, uint32_t a, uint32_t b)
+void rp_uf_union(uint32_t *parent, uint32_t a, uint32_t b)
 {
-    a = uf_find(parent, a);
-    b = uf_find(parent, b);
+    a = rp_uf_find(parent, a);
+    b = rp_uf_find(parent, b);
     /* The smaller index becomes the root: the result does not depend on
      * the order of the unions. */
     if (a < b)
@@ -567,7 +567,7 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
         for (size_t j = i + 1; j < nkeys && weld_cmp_cell(&keys[j], ki) == 0; j++) {
             rp_vec3 pj = mesh->faces[keys[j].slot / 4].c[keys[j].slot % 4];
             if (rp_v3_length(rp_v3_sub(pi, pj)) <= tol)
-                uf_union(parent, ki->slot, keys[j].slot);
+                rp_uf_union(parent, ki->slot, keys[j].slot);
         }
         if (!(cell > 0))
             continue;
@@ -590,7 +590,7 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
                          j < nkeys && weld_cmp_cell(&keys[j], &probe) == 0; j++) {
                         rp_vec3 pj = mesh->faces[keys[j].slot / 4].c[keys[j].slot % 4];
                         if (rp_v3_length(rp_v3_sub(pi, pj)) <= tol)
-                            uf_union(parent, ki->slot, keys[j].slot);
+                            rp_uf_union(parent, ki->slot, keys[j].slot);
                     }
                 }
     }
@@ -605,7 +605,7 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
         goto nomem;
     for (size_t f = 0; f < nfaces; f++)
         for (uint32_t c = 0; c < sf[f].nverts; c++) {
-            uint32_t s = (uint32_t)(4 * f + c), r = uf_find(parent, s);
+            uint32_t s = (uint32_t)(4 * f + c), r = rp_uf_find(parent, s);
             if (wid[r] == RP_NONE) {
                 wid[r] = (uint32_t)nweld;
                 wpos[nweld++] = mesh->faces[f].c[c];
@@ -663,16 +663,16 @@ rp_status rp_mesh_create(const rp_scene *scene, const rp_mesh_params *params, rp
     for (size_t f = 0; f < nfaces; f++) {
         const uint32_t *eo = &edge_of[4 * f];
         if (sf[f].nverts == 4) {
-            uf_union(eparent, eo[0], eo[2]); /* v0v1 ~ v3v2: n */
-            uf_union(eparent, eo[1], eo[3]); /* v1v2 ~ v0v3: m */
+            rp_uf_union(eparent, eo[0], eo[2]); /* v0v1 ~ v3v2: n */
+            rp_uf_union(eparent, eo[1], eo[3]); /* v1v2 ~ v0v3: m */
         } else {
-            uf_union(eparent, eo[0], eo[1]);
-            uf_union(eparent, eo[1], eo[2]);
+            rp_uf_union(eparent, eo[0], eo[1]);
+            rp_uf_union(eparent, eo[1], eo[2]);
         }
     }
     size_t nclass = 0;
     for (size_t i = 0; i < nue; i++) {
-        uint32_t r = uf_find(eparent, (uint32_t)i);
+        uint32_t r = rp_uf_find(eparent, (uint32_t)i);
         if (class_of_root[r] == RP_NONE)
             class_of_root[r] = (uint32_t)nclass++;
         ue_class[i] = class_of_root[r];

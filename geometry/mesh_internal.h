@@ -42,6 +42,13 @@ struct rp_mesh {
     int disc_truncated;   /* discontinuity mesh: D1 tracing hit its work cap */
 };
 
+/* Union-find over uint32_t indices (parent[x] == x at the roots), with
+ * path halving; the smaller index becomes the root, so the result does not
+ * depend on the order of the unions (mesh.c; also discontinuity.c's
+ * welding of vertices). */
+uint32_t rp_uf_find(uint32_t *parent, uint32_t x);
+void rp_uf_union(uint32_t *parent, uint32_t a, uint32_t b);
+
 /* What the discontinuity mesher needs of rp_mesh_create's welding: the
  * welded corner of face-corner slot 4 f + c, the unique edge of face-edge
  * slot 4 f + e (edges of one surface that join the same welded corners are
