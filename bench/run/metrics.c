@@ -139,23 +139,12 @@ int rp_metrics_resolved(const rp_debiased_mse *d)
 double rp_metrics_surface_error(const double *x, const double *ref, const unsigned char *smask,
                                 size_t ns, size_t nb, size_t *count)
 {
-    double s = 0;
-    size_t m = 0;
-    for (size_t i = 0; i < ns; i++) {
-        if (smask && !smask[i])
-            continue;
-        for (size_t b = 0; b < nb; b++) {
-            double r = ref[i * nb + b];
-            if (!(r > 0))
-                continue;
-            double e = (x[i * nb + b] - r) / r;
-            s += e * e;
-            m++;
-        }
-    }
+    /* with no reference noise the debiased MSE is the plain one */
+    rp_debiased_mse d;
+    rp_metrics_debiased_surfaces(x, ref, NULL, smask, ns, nb, &d);
     if (count)
-        *count = m;
-    return m ? sqrt(s / (double)m) : NAN;
+        *count = d.count;
+    return d.count ? sqrt(d.mse) : NAN;
 }
 
 void rp_metrics_error_map(const float *img, const float *ref, size_t npix, size_t nb, float *out)
