@@ -353,7 +353,7 @@ Test(checkpoint, damaged_checkpoint_is_refused)
 
 /* radpt reference --checkpoint: the same for a path-traced reference
  * (image, variance and surface averages), stopped by SIGINT and resumed
- * with a smaller --spp than it was started with (the probe batch, 64 per
+ * with a smaller --spp than it was started with (the probe batch, 256 per
  * step, does not depend on it). */
 Test(checkpoint, interrupted_reference_resumes_bit_identical)
 {
