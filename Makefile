@@ -15,7 +15,7 @@
 
 DEB_PACKAGES := gcc g++ make pkg-config libgsl-dev libopenexr-dev openexr \
                 libembree-dev libcgal-dev libcgal-demo libgmp-dev libmpfr-dev libcriterion-dev \
-                libpng-dev gnuplot-nox openmpi-bin libopenmpi-dev
+                libpng-dev gnuplot-nox openmpi-bin libopenmpi-dev libeigen3-dev
 
 VERSION := 0.15.0
 GIT_DESCRIBE := $(shell git describe --always --dirty 2>/dev/null || echo unknown)
@@ -30,6 +30,8 @@ GSL_LIBS   := $(shell pkg-config --libs gsl 2>/dev/null || echo -lgsl -lgslcblas
 # Open MPI: only bench/run/mpi.c includes mpi.h; a plain run makes no MPI call.
 MPI_CFLAGS := $(shell pkg-config --cflags ompi-c 2>/dev/null)
 MPI_LIBS   := $(shell pkg-config --libs ompi-c 2>/dev/null || echo -lmpi)
+# Eigen (header-only) for CGAL's Garland-Heckbert simplification policies.
+EIGEN_CFLAGS := $(shell pkg-config --cflags eigen3 2>/dev/null || echo -I/usr/include/eigen3)
 
 OPT      ?= -O2
 SANITIZE ?=
@@ -110,6 +112,10 @@ $(BUILD)/tests/run: $(TEST_OBJ) $(BUILD)/libradpt.a
 	$(CC) $(LDFLAGS) -o $@ $^ -lcriterion $(LDLIBS)
 
 $(BUILD)/bench/run/mpi.o: CPPFLAGS += $(MPI_CFLAGS)
+$(BUILD)/geometry/cgal/simplify.o $(FUZZ_BUILD)/geometry/cgal/simplify.o: CPPFLAGS += $(EIGEN_CFLAGS) -DCGAL_EIGEN3_ENABLED
+# GCC 12 takes Eigen 3.4's 4x4 matrix copy in CGAL's quadric property map for a
+# use of uninitialised memory (a known false positive of -Wmaybe-uninitialized).
+$(BUILD)/geometry/cgal/simplify.o: CXXFLAGS += -Wno-maybe-uninitialized
 $(BUILD)/bench/run/plugin.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"'
 $(BUILD)/bench/cli/main.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"' -DRP_GIT_DESCRIBE='"$(GIT_DESCRIBE)"'
 $(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"' \

@@ -1928,3 +1928,152 @@ int rp_scene_is_closed(const rp_scene *s)
     free(tri);
     return r;
 }
+
+/* ------------------------------------------------- derived scenes */
+
+static rp_status copy_strings(char **from, size_t n, char ***to)
+{
+    *to = n ? calloc(n, sizeof **to) : NULL;
+    if (n && !*to)
+        return RP_ERR_NOMEM;
+    for (size_t i = 0; i < n; i++)
+        if (!((*to)[i] = dup_string(from[i])))
+            return RP_ERR_NOMEM;
+    return RP_OK;
+}
+
+static rp_status with_surfaces(const rp_scene *a, const rp_surface_triangles *const *replace, rp_scene *s,
+                               size_t *dropped)
+{
+    const size_t nb = a->nbands;
+    s->band_kind = a->band_kind;
+    s->nbands = nb;
+    if (a->wavelengths) {
+        if (!(s->wavelengths = malloc(nb * sizeof *s->wavelengths)))
+            return RP_ERR_NOMEM;
+        memcpy(s->wavelengths, a->wavelengths, nb * sizeof *s->wavelengths);
+    }
+    if (copy_strings(a->files, a->nfiles, &s->files) != RP_OK)
+        return RP_ERR_NOMEM;
+    s->nfiles = s->cap_files = a->nfiles;
+    if (copy_strings(a->warnings, a->nwarnings, &s->warnings) != RP_OK)
+        return RP_ERR_NOMEM;
+    s->nwarnings = s->cap_warnings = a->nwarnings;
+    if (a->nmaterials && !(s->materials = calloc(a->nmaterials, sizeof *s->materials)))
+        return RP_ERR_NOMEM;
+    s->nmaterials = s->cap_materials = a->nmaterials;
+    for (size_t i = 0; i < a->nmaterials; i++) {
+        rp_material *m = &s->materials[i];
+        double *rho = malloc(nb * sizeof *rho), *Le = malloc(nb * sizeof *Le);
+        m->name = dup_string(a->materials[i].name);
+        m->rho = rho;
+        m->Le = Le;
+        if (!rho || !Le || !m->name)
+            return RP_ERR_NOMEM;
+        memcpy(rho, a->materials[i].rho, nb * sizeof *rho);
+        memcpy(Le, a->materials[i].Le, nb * sizeof *Le);
+        m->emitter = a->materials[i].emitter;
+    }
+    s->has_camera = a->has_camera;
+    s->camera = a->camera;
+
+    /* Kept surfaces keep their vertices (renumbered); replaced ones get
+     * their new triangles' vertices. */
+    uint32_t *map = malloc((a->nvertices ? a->nvertices : 1) * sizeof *map);
+    if (!map)
+        return RP_ERR_NOMEM;
+    for (size_t i = 0; i < a->nvertices; i++)
+        map[i] = RP_NONE;
+    if (a->nsurfaces && !(s->surfaces = calloc(a->nsurfaces, sizeof *s->surfaces))) {
+        free(map);
+        return RP_ERR_NOMEM;
+    }
+    s->cap_surfaces = a->nsurfaces;
+    rp_status st = RP_OK;
+    for (size_t k = 0; k < a->nsurfaces && st == RP_OK; k++) {
+        const rp_surface *from = &a->surfaces[k];
+        rp_surface *to = &s->surfaces[s->nsurfaces++];
+        *to = *from;
+        to->first_face = (uint32_t)s->nfaces;
+        to->nfaces = 0;
+        to->area = 0;
+        to->file = NULL;
+        for (size_t i = 0; i < a->nfiles; i++)
+            if (from->file == a->files[i])
+                to->file = s->files[i];
+        if (!(to->name = dup_string(from->name))) {
+            st = RP_ERR_NOMEM;
+            break;
+        }
+        const rp_surface_triangles *r = replace ? replace[k] : NULL;
+        size_t base = s->nvertices;
+        if (r) {
+            if (!grow((void **)&s->vertices, &s->cap_vertices, s->nvertices + r->nvertices, sizeof *s->vertices)) {
+                st = RP_ERR_NOMEM;
+                break;
+            }
+            for (size_t i = 0; i < r->nvertices; i++)
+                s->vertices[s->nvertices++] = rp_v3(r->xyz[3 * i], r->xyz[3 * i + 1], r->xyz[3 * i + 2]);
+        }
+        size_t nf = r ? r->ntriangles : from->nfaces;
+        if (!grow((void **)&s->faces, &s->cap_faces, s->nfaces + nf, sizeof *s->faces)) {
+            st = RP_ERR_NOMEM;
+            break;
+        }
+        for (size_t j = 0; j < nf; j++) {
+            rp_face f;
+            memset(&f, 0, sizeof f);
+            if (r) {
+                f.nverts = 3;
+                for (int i = 0; i < 3; i++)
+                    f.v[i] = (uint32_t)(base + r->tri[3 * j + i]);
+                f.v[3] = RP_NONE;
+                rp_vec3 v[3] = {s->vertices[f.v[0]], s->vertices[f.v[1]], s->vertices[f.v[2]]};
+                char buf[8];
+                if (face_check(v, 3, &f.normal, &f.area, buf, sizeof buf)) {
+                    (*dropped)++; /* a collapse left a sliver of no area */
+                    continue;
+                }
+            } else {
+                f = a->faces[from->first_face + j];
+                for (uint32_t i = 0; i < f.nverts && st == RP_OK; i++) {
+                    uint32_t v = f.v[i];
+                    if (map[v] == RP_NONE) {
+                        if (!grow((void **)&s->vertices, &s->cap_vertices, s->nvertices + 1, sizeof *s->vertices))
+                            st = RP_ERR_NOMEM;
+                        else {
+                            s->vertices[s->nvertices] = a->vertices[v];
+                            map[v] = (uint32_t)s->nvertices++;
+                        }
+                    }
+                    f.v[i] = map[v];
+                }
+            }
+            f.surface = (uint32_t)k;
+            s->faces[s->nfaces++] = f;
+            to->nfaces++;
+            to->area += f.area;
+        }
+    }
+    free(map);
+    if (st == RP_OK)
+        compute_bounds(s);
+    return st;
+}
+
+rp_status rp_scene_with_surfaces(const rp_scene *scene, const rp_surface_triangles *const *replace,
+                                 rp_scene **out, size_t *dropped, rp_error *err)
+{
+    *out = NULL;
+    size_t nd = 0;
+    rp_scene *s = calloc(1, sizeof *s);
+    rp_status st = s ? with_surfaces(scene, replace, s, &nd) : RP_ERR_NOMEM;
+    if (st != RP_OK) {
+        rp_scene_destroy(s);
+        return rp_error_set(err, st, "out of memory copying the scene");
+    }
+    if (dropped)
+        *dropped = nd;
+    *out = s;
+    return RP_OK;
+}

@@ -151,6 +151,24 @@ int rp_scene_is_closed(const rp_scene *scene);
  * p = (1-u)(1-v) v0 + u(1-v) v1 + uv v2 + (1-u)v v3. */
 rp_vec3 rp_scene_face_point(const rp_scene *scene, uint32_t face, double u, double v);
 
+/* New triangles for one surface (rp_scene_with_surfaces). */
+typedef struct rp_surface_triangles {
+    const double *xyz;     /* 3 * nvertices */
+    size_t nvertices;
+    const uint32_t *tri;   /* 3 * ntriangles, counter-clockwise from the front */
+    size_t ntriangles;
+} rp_surface_triangles;
+
+/* A copy of scene (bands, materials, surfaces in the same order and with the
+ * same names, camera, warnings) in which each surface k with replace[k] !=
+ * NULL has those triangles for faces instead of its own (replace may be
+ * NULL: a plain copy).  Triangles of no area are left out and counted in
+ * *dropped (may be NULL).  The copy is what a solver solves on when it
+ * models a surface more coarsely than the rays see it (geometry/simplify.h).
+ * Fails only for lack of memory. */
+rp_status rp_scene_with_surfaces(const rp_scene *scene, const rp_surface_triangles *const *replace,
+                                 rp_scene **out, size_t *dropped, rp_error *err);
+
 #ifdef __cplusplus
 }
 #endif

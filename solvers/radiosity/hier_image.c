@@ -578,7 +578,24 @@ typedef struct img_job {
     const hier_state *s;
     const hier_vertices *hv;
     rp_recon_gather gather; /* (gather) */
+    double *vtx;            /* --simplify: the solution at the full mesh's vertices */
 } img_job;
+
+/* B at point p of solution face `face`: the leaf's own value. */
+static void eval_flat(const void *ctx, uint32_t face, rp_vec3 p, double *B)
+{
+    const hier_state *s = ((const img_job *)ctx)->s;
+    double w[4];
+    uint32_t leaf = hier_locate(s, face, p, w);
+    memcpy(B, s->B + (size_t)leaf * s->nb, s->nb * sizeof *B);
+}
+
+/* B there interpolated from the leaves' corners. */
+static void eval_gouraud(const void *ctx, uint32_t face, rp_vec3 p, double *B)
+{
+    const img_job *j = ctx;
+    hier_vertices_eval(j->s, j->hv, face, p, B);
+}
 
 static void shade(const void *ctx, const rp_hit *h, uint64_t key, double *xyg, uint32_t *perm, double *L,
                   unsigned long long *rays)
@@ -590,37 +607,33 @@ static void shade(const void *ctx, const rp_hit *h, uint64_t key, double *xyg, u
         L[b] = 0;
     if (!h->front)
         return; /* the back of a face is black */
-    switch (s->recon) {
-    case HIER_RECON_FLAT: {
-        double w[4];
-        uint32_t leaf = hier_locate(s, h->face, h->p, w);
-        for (size_t b = 0; b < nb; b++)
-            L[b] = s->B[(size_t)leaf * nb + b] / RP_PI;
-        return;
-    }
-    case HIER_RECON_GOURAUD:
-        hier_vertices_eval(s, j->hv, h->face, h->p, L);
-        for (size_t b = 0; b < nb; b++)
-            L[b] /= RP_PI;
-        return;
-    case HIER_RECON_GATHER:
+    if (s->recon == HIER_RECON_GATHER) {
         rp_recon_final_gather(&j->gather, h, key, xyg, perm, L, rays);
         return;
     }
+    const rp_solution_eval_fn eval = s->recon == HIER_RECON_FLAT ? eval_flat : eval_gouraud;
+    if (s->sol) /* h is on the full scene */
+        rp_solution_eval(s->sol, nb, eval, j, j->vtx, h->face, h->p, L);
+    else
+        eval(j, h->face, h->p, L);
+    for (size_t b = 0; b < nb; b++)
+        L[b] /= RP_PI;
 }
 
-/* The solution at a gather ray's hit: the leaf's radiosity. */
+/* The solution at a gather ray's hit: the leaf's radiosity (with
+ * --simplify, interpolated from the leaves under the full mesh's vertices). */
 static void leaf_radiosity(const void *ctx, const rp_hit *g, double *B)
 {
-    const hier_state *s = ((const img_job *)ctx)->s;
-    double w[4];
-    uint32_t leaf = hier_locate(s, g->face, g->p, w);
-    memcpy(B, s->B + (size_t)leaf * s->nb, s->nb * sizeof *B);
+    const img_job *j = ctx;
+    if (j->s->sol)
+        rp_solution_eval(j->s->sol, j->s->nb, eval_flat, j, j->vtx, g->face, g->p, B);
+    else
+        eval_flat(j, g->face, g->p, B);
 }
 
 rp_status hier_image(const hier_state *s, float *out, float *variance, double *rays, rp_error *err)
 {
-    if (!rp_scene_camera(s->scene))
+    if (!rp_scene_camera(s->view))
         return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
     const size_t nb = s->nb;
     img_job job = {.s = s};
@@ -632,16 +645,28 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
         job.hv = hv;
         *rays += hv->rays;
     }
+    if (s->sol) {
+        const size_t nv = rp_scene_nvertices(s->view);
+        if (!(job.vtx = calloc(nv ? nv * nb : 1, sizeof *job.vtx))) {
+            hier_vertices_destroy(hv);
+            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory");
+        }
+        rp_solution_vertex_values(s->sol, nb, s->recon == HIER_RECON_GOURAUD ? eval_gouraud : eval_flat, &job,
+                                  job.vtx);
+    }
     rp_area_sampler *lights = NULL;
     if (s->recon == HIER_RECON_GATHER) {
-        if ((st = rp_recon_lights(s->scene, &lights, err)) != RP_OK)
+        if ((st = rp_recon_lights(s->view, &lights, err)) != RP_OK) {
+            free(job.vtx);
             return st;
-        job.gather = (rp_recon_gather){.scene = s->scene, .rc = s->rc, .lights = lights, .rays = s->gather_rays,
+        }
+        job.gather = (rp_recon_gather){.scene = s->view, .rc = s->view_rc, .lights = lights, .rays = s->gather_rays,
                                        .nb = nb, .radiosity = leaf_radiosity, .ctx = &job};
     }
     const rp_recon_shader shader = {shade, &job, s->recon == HIER_RECON_GATHER ? s->gather_rays : 1};
-    st = rp_recon_camera(s->scene, s->rc, s->spp, s->seed, s->threads, nb, &shader, out, variance, rays, err);
+    st = rp_recon_camera(s->view, s->view_rc, s->spp, s->seed, s->threads, nb, &shader, out, variance, rays, err);
     hier_vertices_destroy(hv);
     rp_area_sampler_destroy(lights);
+    free(job.vtx);
     return st;
 }

@@ -91,6 +91,12 @@ static const rp_option_spec hier_options[] = {
      "with clustering, links to elements and clusters smaller than FRAC x the area of the faces "
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
      "1e-3"},
+    {"simplify", "off|auto|R",
+     "solve on a simplified copy of each triangle mesh of at least 1000 triangles (CGAL edge collapse, "
+     "Garland-Heckbert quadrics; borders kept): auto collapses while the quadric error stays below 0.1% "
+     "of the scene's diagonal, R in (0,1) keeps that fraction of the edges; camera rays and final "
+     "gathers still see the full meshes",
+     "off"},
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
     {"vertex-rays", "N",
@@ -126,6 +132,9 @@ static void hier_fini(void *state)
 {
     hier_state *s = state;
     rp_raycast_destroy(s->rc);
+    if (s->view_rc != s->rc)
+        rp_raycast_destroy(s->view_rc);
+    rp_solution_destroy(s->sol);
     free(s->faces);
     free(s->nodes);
     free(s->B);
@@ -240,6 +249,24 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
 {
     hier_state *s = state;
     memset(s, 0, sizeof *s);
+    rp_status st;
+    /* --simplify first: everything below reads the scene solved on. */
+    s->view = scene;
+    const char *sm = rp_options_word(o, "simplify");
+    if (sm && strcmp(sm, "off") != 0) {
+        double ratio = 0;
+        if (strcmp(sm, "auto") != 0) {
+            char *end = NULL;
+            ratio = strtod(sm, &end);
+            if (end == sm || *end || !(ratio > 0 && ratio < 1))
+                return rp_error_set(err, RP_ERR_INPUT,
+                                    "--simplify: '%s' is not off, auto or a fraction in (0, 1)", sm);
+        }
+        if ((st = rp_solution_create(scene, ratio, 0, &s->sol, o ? o->log : NULL, o ? o->log_ctx : NULL, err)) !=
+            RP_OK)
+            return st;
+        scene = rp_solution_scene(s->sol);
+    }
     s->scene = scene;
     s->nb = rp_scene_nbands(scene);
     s->nfaces = rp_scene_nfaces(scene);
@@ -256,7 +283,6 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->cancel = o ? o->cancel : NULL;
     s->seed = o ? o->seed : 0;
 
-    rp_status st;
     s->bf_rel = atof(HIER_DEFAULT_BF);
     s->min_area_rel = atof(HIER_DEFAULT_MIN_AREA);
     /* the other defaults: the option specs' fallbacks (rp_options_double,
@@ -369,6 +395,10 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     if ((st = rp_raycast_create(scene, NULL, &s->rc, err)) != RP_OK)
         return st;
     if ((st = rp_options_ray_offset(o, s->rc, err)) != RP_OK)
+        return st;
+    s->view_rc = s->rc;
+    if (s->sol && ((st = rp_raycast_create(s->view, NULL, &s->view_rc, err)) != RP_OK ||
+                   (st = rp_options_ray_offset(o, s->view_rc, err)) != RP_OK))
         return st;
     if ((st = hier_nodes_init(s, err)) != RP_OK)
         return st;

@@ -1,0 +1,83 @@
+/* A solution mesh separate from the ray mesh (issue 18: "model no more than
+ * a scene needs").
+ *
+ * A dense scanned mesh carries far more faces than the light on it needs.
+ * rp_solution_create simplifies each dense triangle-mesh surface of a scene
+ * (the CGAL shim's Garland-Heckbert edge collapse, geometry/cgal/simplify.h)
+ * and returns the coarser scene a finite-element method solves on, with a
+ * map from the full scene's faces back into it:
+ *
+ *   - a face of a surface left as it is maps to its copy (same plane, so a
+ *     point on one is a point on the other);
+ *   - a vertex of a simplified surface maps to its closest point on the
+ *     simplified surface (a face of the solution scene and barycentric
+ *     weights there); the solution at a point of a full face is then the
+ *     linear interpolation of the solution at its three vertices' images,
+ *     which is continuous across the full mesh: no cracks, whatever the
+ *     method's own reconstruction on the coarse faces.
+ *
+ * Camera rays, final gathers and everything a user sees keep the full
+ * geometry; the solver's own visibility uses the solution scene (a ray
+ * leaving a simplified face would start on the wrong side of the full
+ * surface about half of the time).
+ *
+ * Which surfaces: those of the scene's `mesh` statements (and OBJ groups)
+ * with at least RP_SIMPLIFY_MIN_FACES triangles that form an oriented
+ * 2-manifold; the others are kept, and a surface that cannot be simplified
+ * is named in a message.  How far: `ratio` keeps that fraction of the
+ * edges; `auto` (ratio 0) collapses while the quadric error stays below
+ * (RP_SIMPLIFY_AUTO_TOLERANCE x the scene's diagonal)^2, a bound relative
+ * to the scene, so it does not depend on its size or units. */
+#ifndef RP_SIMPLIFY_H
+#define RP_SIMPLIFY_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "scene.h"
+#include "status.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define RP_SIMPLIFY_MIN_FACES 1000
+#define RP_SIMPLIFY_AUTO_TOLERANCE 1e-3
+
+typedef struct rp_solution rp_solution;
+
+/* ratio in (0, 1): keep that fraction of each dense surface's edges;
+ * 0: auto (see above).  tolerance_rel > 0 overrides the auto tolerance
+ * (a fraction of the scene's diagonal; with a ratio, both limits hold).
+ * On success *out is the solution (rp_solution_scene is the scene itself,
+ * copied, when no surface was simplified); messages (one per dense
+ * surface: what it became, or why it was kept) go to log when non-NULL. */
+rp_status rp_solution_create(const rp_scene *full, double ratio, double tolerance_rel, rp_solution **out,
+                             void (*log)(void *ctx, const char *message), void *log_ctx, rp_error *err);
+void rp_solution_destroy(rp_solution *sol);
+
+/* The scene to solve on. */
+const rp_scene *rp_solution_scene(const rp_solution *sol);
+/* Surfaces simplified, and the largest distance measured between a full
+ * and a simplified surface at their vertices (both ways), scene units. */
+size_t rp_solution_nsimplified(const rp_solution *sol);
+double rp_solution_max_distance(const rp_solution *sol);
+
+/* The solution's value at full-scene points.  eval(ctx, face, p, out) gives
+ * nb values at point p of solution face `face`.  rp_solution_vertex_values
+ * evaluates it once at every full vertex of a simplified surface (into
+ * values, nvertices(full) x nb; other rows are left alone);
+ * rp_solution_eval then gives the value at point p of full face `face`:
+ * the solution face's own value for a kept surface, the interpolation of
+ * the vertex values for a simplified one. */
+typedef void (*rp_solution_eval_fn)(const void *ctx, uint32_t face, rp_vec3 p, double *out);
+void rp_solution_vertex_values(const rp_solution *sol, size_t nb, rp_solution_eval_fn eval, const void *ctx,
+                               double *values);
+void rp_solution_eval(const rp_solution *sol, size_t nb, rp_solution_eval_fn eval, const void *ctx,
+                      const double *values, uint32_t face, rp_vec3 p, double *out);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

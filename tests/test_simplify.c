@@ -1,0 +1,419 @@
+/* A solution mesh separate from the ray mesh (geometry/simplify.h, the CGAL
+ * shim's geometry/cgal/simplify.h, hierarchical radiosity's --simplify).
+ *
+ * Checked against what the code does not compute:
+ *   - the shim on a latitude-longitude sphere and a flat grid: face counts
+ *     asked for, orientation, enclosed volume, a flat mesh staying flat with
+ *     its area and its outline, a non-manifold fan refused;
+ *   - the map back: each full vertex lies within the reported distance of
+ *     its image on the simplified mesh;
+ *   - radiosity inside a spherical enclosure: the form factor from any point
+ *     of a sphere's inside to any part of it is that part's share of the area
+ *     (Siegel & Howell, "the sphere" configuration), so with a lamp cap of
+ *     area Ac emitting E and reflectance rho everywhere, the irradiance is
+ *     the same at every point, H = E Ac / (A (1 - rho)), and the wall's
+ *     radiosity is rho H.  A sphere of flat facets holds this to O(h^2).
+ *     Solved on the full wall and on its simplification, the surface
+ *     average and every pixel of an image of the wall (which goes through
+ *     the map back to the full mesh: a crack would be a dark pixel) must
+ *     match it. */
+#include <criterion/criterion.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "geometry/cgal/simplify.h"
+#include "geometry/scene.h"
+#include "geometry/simplify.h"
+#include "solvers/radiosity/hierarchical.h"
+#include "solvers/solver.h"
+#include "scene_util.h"
+
+/* ---- meshes made here ---- */
+
+typedef struct tmesh {
+    double *xyz;
+    uint32_t *tri;
+    size_t nv, nt;
+} tmesh;
+
+static void tmesh_free(tmesh *m)
+{
+    free(m->xyz);
+    free(m->tri);
+}
+
+static void push_tri(tmesh *m, uint32_t a, uint32_t b, uint32_t c)
+{
+    m->tri[3 * m->nt] = a;
+    m->tri[3 * m->nt + 1] = b;
+    m->tri[3 * m->nt + 2] = c;
+    m->nt++;
+}
+
+/* A unit sphere of `slices` x `stacks` (poles as fans), triangles wound
+ * outward (inward when `inward`).  Rows of latitude first..last only
+ * (0..stacks for the whole sphere; rows are stacks+1 rings, the poles being
+ * rings of one point). */
+static tmesh uv_sphere(int slices, int stacks, int first, int last, int inward)
+{
+    tmesh m = {0};
+    size_t cap = (size_t)(stacks + 1) * (size_t)slices;
+    m.xyz = malloc(3 * cap * sizeof *m.xyz);
+    m.tri = malloc(6 * cap * sizeof *m.tri);
+    cr_assert(m.xyz && m.tri);
+    /* ring r (0 = north pole) */
+    uint32_t *ring = malloc((size_t)(stacks + 1) * sizeof *ring);
+    for (int r = first; r <= last; r++) {
+        ring[r] = (uint32_t)m.nv;
+        double th = M_PI * r / stacks;
+        int n = (r == 0 || r == stacks) ? 1 : slices;
+        for (int k = 0; k < n; k++) {
+            double ph = 2 * M_PI * k / slices;
+            m.xyz[3 * m.nv] = sin(th) * cos(ph);
+            m.xyz[3 * m.nv + 1] = cos(th);
+            m.xyz[3 * m.nv + 2] = sin(th) * sin(ph);
+            m.nv++;
+        }
+    }
+    for (int r = first; r < last; r++)
+        for (int k = 0; k < slices; k++) {
+            int k1 = (k + 1) % slices;
+            uint32_t a = ring[r] + (r == 0 ? 0 : (uint32_t)k), b = ring[r] + (r == 0 ? 0 : (uint32_t)k1);
+            uint32_t c = ring[r + 1] + (r + 1 == stacks ? 0 : (uint32_t)k),
+                     d = ring[r + 1] + (r + 1 == stacks ? 0 : (uint32_t)k1);
+            /* seen from outside, (a, c, d) and (a, d, b) are counter-clockwise
+             * when y is up and phi turns from x to z: checked below */
+            if (r != 0)
+                push_tri(&m, a, d, c), push_tri(&m, a, b, d);
+            else
+                push_tri(&m, a, d, c);
+            if (r == 0 || r + 1 == stacks) {
+                if (r + 1 == stacks) {
+                    m.nt--;
+                    m.nt--;
+                    push_tri(&m, a, b, c);
+                }
+            }
+        }
+    free(ring);
+    /* Orient every triangle by its centroid (the sphere is star-shaped
+     * about the origin), outward or inward as asked. */
+    for (size_t f = 0; f < m.nt; f++) {
+        const double *p0 = m.xyz + 3 * m.tri[3 * f], *p1 = m.xyz + 3 * m.tri[3 * f + 1],
+                     *p2 = m.xyz + 3 * m.tri[3 * f + 2];
+        double e1[3], e2[3], n[3], c[3];
+        for (int i = 0; i < 3; i++) {
+            e1[i] = p1[i] - p0[i];
+            e2[i] = p2[i] - p0[i];
+            c[i] = p0[i] + p1[i] + p2[i];
+        }
+        n[0] = e1[1] * e2[2] - e1[2] * e2[1];
+        n[1] = e1[2] * e2[0] - e1[0] * e2[2];
+        n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+        double out = n[0] * c[0] + n[1] * c[1] + n[2] * c[2];
+        if ((out < 0) != (inward != 0)) {
+            uint32_t t = m.tri[3 * f + 1];
+            m.tri[3 * f + 1] = m.tri[3 * f + 2];
+            m.tri[3 * f + 2] = t;
+        }
+    }
+    return m;
+}
+
+/* Signed volume enclosed (divergence theorem: sum of det(p0, p1, p2) / 6). */
+static double volume(const double *xyz, const uint32_t *tri, size_t nt)
+{
+    double v = 0;
+    for (size_t f = 0; f < nt; f++) {
+        const double *a = xyz + 3 * tri[3 * f], *b = xyz + 3 * tri[3 * f + 1], *c = xyz + 3 * tri[3 * f + 2];
+        v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+             a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    return v / 6;
+}
+
+static double tri_area(const double *xyz, const uint32_t *t)
+{
+    const double *a = xyz + 3 * t[0], *b = xyz + 3 * t[1], *c = xyz + 3 * t[2];
+    double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+    return 0.5 * sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+}
+
+/* ---- the shim ---- */
+
+Test(simplify, sphere_to_a_tenth)
+{
+    tmesh m = uv_sphere(64, 40, 0, 40, 0);
+    cr_assert_eq(m.nt, 64 * 2 * 39);
+    double v0 = volume(m.xyz, m.tri, m.nt);
+    cr_assert(v0 > 0.97 * 4 * M_PI / 3 && v0 < 4 * M_PI / 3, "volume %g", v0);
+    rp_simplified s;
+    char msg[256] = "";
+    rp_simplify_params p = {.ratio = 0.1, .tolerance = 0};
+    cr_assert_eq(rp_cgal_simplify(m.xyz, m.nv, m.tri, m.nt, &p, &s, msg, sizeof msg), 0, "%s", msg);
+    /* A closed mesh has 3F/2 edges: a tenth of the edges is a tenth of the
+     * faces (one collapse removes 3 edges and 2 faces, so the count can
+     * stop one collapse under). */
+    cr_assert(s.ntriangles <= m.nt / 10 + 2 && s.ntriangles >= m.nt / 10 - 4, "%zu of %zu", s.ntriangles, m.nt);
+    /* Still the sphere: outward, volume within 2%, vertices near radius 1. */
+    double v1 = volume(s.xyz, s.tri, s.ntriangles);
+    cr_assert(fabs(v1 / v0 - 1) < 0.02, "volume %g against %g", v1, v0);
+    for (size_t i = 0; i < s.nvertices; i++) {
+        double r = sqrt(s.xyz[3 * i] * s.xyz[3 * i] + s.xyz[3 * i + 1] * s.xyz[3 * i + 1] +
+                        s.xyz[3 * i + 2] * s.xyz[3 * i + 2]);
+        cr_assert(fabs(r - 1) < 0.02, "vertex %zu at radius %g", i, r);
+    }
+    /* The map back: each input vertex's image is a point of the triangle
+     * named, and no farther than the distance reported; the largest is it. */
+    double worst = 0;
+    for (size_t i = 0; i < m.nv; i++) {
+        const uint32_t *t = s.tri + 3 * (size_t)s.vertex_tri[i];
+        const double *w = s.vertex_bary + 3 * i;
+        cr_assert(s.vertex_tri[i] < s.ntriangles);
+        cr_assert(w[0] >= 0 && w[1] >= 0 && w[2] >= 0 && fabs(w[0] + w[1] + w[2] - 1) < 1e-12);
+        double d2 = 0;
+        for (int c = 0; c < 3; c++) {
+            double q = w[0] * s.xyz[3 * t[0] + c] + w[1] * s.xyz[3 * t[1] + c] + w[2] * s.xyz[3 * t[2] + c];
+            d2 += (q - m.xyz[3 * i + c]) * (q - m.xyz[3 * i + c]);
+        }
+        worst = fmax(worst, sqrt(d2));
+    }
+    cr_assert(fabs(worst - s.max_distance_in) < 1e-9, "%g against %g", worst, s.max_distance_in);
+    cr_assert(s.max_distance_in > 0 && s.max_distance_in < 0.05);
+    cr_assert(s.max_distance_out >= 0 && s.max_distance_out < 0.05);
+    cr_assert_eq(s.border_edges, 0);
+    rp_simplified_free(&s);
+    tmesh_free(&m);
+}
+
+Test(simplify, flat_grid_keeps_its_outline)
+{
+    const int n = 40;
+    tmesh m = {0};
+    m.xyz = malloc(3 * (size_t)(n + 1) * (n + 1) * sizeof *m.xyz);
+    m.tri = malloc(6 * (size_t)n * n * sizeof *m.tri);
+    for (int j = 0; j <= n; j++)
+        for (int i = 0; i <= n; i++) {
+            m.xyz[3 * m.nv] = (double)i / n;
+            m.xyz[3 * m.nv + 1] = (double)j / n;
+            m.xyz[3 * m.nv + 2] = 0;
+            m.nv++;
+        }
+    for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+            uint32_t a = (uint32_t)(j * (n + 1) + i), b = a + 1, c = a + (uint32_t)n + 1, d = c + 1;
+            push_tri(&m, a, b, d);
+            push_tri(&m, a, d, c);
+        }
+    rp_simplified s;
+    char msg[256] = "";
+    rp_simplify_params p = {.ratio = 1, .tolerance = 1e-3};
+    cr_assert_eq(rp_cgal_simplify(m.xyz, m.nv, m.tri, m.nt, &p, &s, msg, sizeof msg), 0, "%s", msg);
+    cr_assert_eq(s.border_edges, 4 * (size_t)n);
+    /* Flat costs nothing, so the inside collapses away; the 4n border
+     * vertices all stay, so at least 4n - 2 triangles remain. */
+    cr_assert(s.ntriangles < m.nt / 4 && s.ntriangles >= 4 * (size_t)n - 2, "%zu triangles", s.ntriangles);
+    double area = 0;
+    for (size_t f = 0; f < s.ntriangles; f++) {
+        area += tri_area(s.xyz, s.tri + 3 * f);
+        /* counter-clockwise seen from +z, as the input */
+        const double *a = s.xyz + 3 * s.tri[3 * f], *b = s.xyz + 3 * s.tri[3 * f + 1], *c = s.xyz + 3 * s.tri[3 * f + 2];
+        cr_assert((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) > 0);
+    }
+    cr_assert(fabs(area - 1) < 1e-12, "area %.15g", area);
+    size_t on_border = 0;
+    for (size_t i = 0; i < s.nvertices; i++) {
+        cr_assert_eq(s.xyz[3 * i + 2], 0.0);
+        double x = s.xyz[3 * i], y = s.xyz[3 * i + 1];
+        on_border += x == 0 || y == 0 || x == 1 || y == 1;
+    }
+    cr_assert_eq(on_border, 4 * (size_t)n);
+    cr_assert(s.max_distance_in < 1e-12 && s.max_distance_out < 1e-12);
+    rp_simplified_free(&s);
+    tmesh_free(&m);
+}
+
+Test(simplify, non_manifold_refused)
+{
+    /* Three triangles on one edge (0, 1). */
+    const double xyz[] = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, -1, 0.5};
+    const uint32_t tri[] = {0, 1, 2, 1, 0, 3, 0, 1, 4};
+    rp_simplified s;
+    char msg[256] = "";
+    rp_simplify_params p = {.ratio = 0.5, .tolerance = 0};
+    cr_assert_eq(rp_cgal_simplify(xyz, 5, tri, 3, &p, &s, msg, sizeof msg), 1);
+    cr_assert(strstr(msg, "2-manifold"), "%s", msg);
+    cr_assert_null(s.xyz);
+}
+
+/* ---- radiosity inside a sphere ---- */
+
+static void write_off(const char *path, const tmesh *m)
+{
+    FILE *f = fopen(path, "w");
+    cr_assert(f, "%s", path);
+    fprintf(f, "OFF\n%zu %zu 0\n", m->nv, m->nt);
+    for (size_t i = 0; i < m->nv; i++)
+        fprintf(f, "%.17g %.17g %.17g\n", m->xyz[3 * i], m->xyz[3 * i + 1], m->xyz[3 * i + 2]);
+    for (size_t t = 0; t < m->nt; t++)
+        fprintf(f, "3 %u %u %u\n", m->tri[3 * t], m->tri[3 * t + 1], m->tri[3 * t + 2]);
+    fclose(f);
+}
+
+static char last_log[8][512];
+static int nlog;
+static void keep_log(void *ctx, const char *msg)
+{
+    (void)ctx;
+    snprintf(last_log[nlog % 8], sizeof last_log[0], "%s", msg);
+    nlog++;
+}
+
+/* Wall and lamp average radiance and the image, solved by hierarchical
+ * radiosity with --simplify `mode`. */
+static void solve_sphere(const rp_scene *scene, const char *mode, double *surf, float *img)
+{
+    const char *keys[] = {"simplify", "bf-epsilon", "spp"}, *vals[] = {mode, "0.02", "4"};
+    rp_options o = {.size = sizeof o, .want = RP_WANT_IMAGE | RP_WANT_SURFACES, .seed = 3, .threads = 0,
+                    .keys = keys, .values = vals, .count = 3, .log = keep_log};
+    rp_solver *s = NULL;
+    rp_error err = {""};
+    cr_assert_eq(rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, &err), RP_OK, "%s", err.message);
+    for (int k = 0;; k++) {
+        rp_step_info info;
+        memset(&info, 0, sizeof info);
+        cr_assert_eq(rp_solver_step(s, &info, &err), RP_OK, "%s", err.message);
+        if (info.converged)
+            break;
+        cr_assert(k < 10000);
+    }
+    rp_estimate e = {.radiance = img, .surface_radiance = surf};
+    cr_assert_eq(rp_solver_estimate(s, &e, &err), RP_OK, "%s", err.message);
+    rp_solver_destroy(s);
+}
+
+Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
+{
+    char dir[] = "/tmp/radpt-simplify-XXXXXX";
+    cr_assert(mkdtemp(dir));
+    char wall_path[256], cap_path[256];
+    snprintf(wall_path, sizeof wall_path, "%s/wall.off", dir);
+    snprintf(cap_path, sizeof cap_path, "%s/cap.off", dir);
+    /* 48 x 32 sphere, facing in: the top 3 rows of latitude are the lamp
+     * (240 triangles, kept), the rest the wall (2736 triangles, simplified),
+     * an open mesh whose border is the lamp's rim. */
+    tmesh wall = uv_sphere(48, 32, 3, 32, 1), cap = uv_sphere(48, 32, 0, 3, 1);
+    write_off(wall_path, &wall);
+    write_off(cap_path, &cap);
+    char text[1024];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial white reflect 0.5\nmaterial lamp reflect 0.5 emit 1\n"
+             "mesh wall white %s\nmesh lamp lamp %s\n"
+             "camera eye 0 0 0 look 0 -1 0 up 0 0 1 fov 60 size 24 24\n",
+             wall_path, cap_path);
+    rp_scene *scene = rp_test_parse(text);
+    const rp_surface *sf = rp_scene_surfaces(scene);
+    const double rho = 0.5, E = 1, Ac = sf[1].area, A = sf[0].area + sf[1].area;
+    /* Le = 1 is the lamp's radiance: its radiosity is pi Le, and the wall's
+     * radiance B / pi = rho Le Ac / (A (1 - rho)). */
+    const double L_wall = rho * E * Ac / (A * (1 - rho));
+    cr_assert_eq(sf[0].nfaces, wall.nt);
+
+    /* The solution mesh itself: the wall simplified, the lamp kept. */
+    rp_solution *sol = NULL;
+    rp_error err = {""};
+    cr_assert_eq(rp_solution_create(scene, 0.3, 0, &sol, NULL, NULL, &err), RP_OK, "%s", err.message);
+    const rp_scene *ss = rp_solution_scene(sol);
+    cr_assert_eq(rp_solution_nsimplified(sol), 1);
+    cr_assert_eq(rp_scene_nsurfaces(ss), 2);
+    cr_assert_str_eq(rp_scene_surfaces(ss)[0].name, "wall");
+    /* 0.3 of the edges: 0.3 of the faces, up to the border edges kept */
+    cr_assert(rp_scene_surfaces(ss)[0].nfaces < 0.32 * (double)wall.nt, "%u of %zu", rp_scene_surfaces(ss)[0].nfaces,
+              wall.nt);
+    cr_assert_eq(rp_scene_surfaces(ss)[1].nfaces, cap.nt);
+    cr_assert(fabs(rp_scene_surfaces(ss)[0].area / sf[0].area - 1) < 0.01);
+    cr_assert(rp_solution_max_distance(sol) > 0 && rp_solution_max_distance(sol) < 0.05, "%g",
+              rp_solution_max_distance(sol));
+    rp_solution_destroy(sol);
+
+    const size_t npx = 24 * 24;
+    float *img = malloc(npx * sizeof *img);
+    double surf[2];
+    const char *modes[] = {"off", "0.3"};
+    for (int k = 0; k < 2; k++) {
+        solve_sphere(scene, modes[k], surf, img);
+        cr_assert(fabs(surf[0] / L_wall - 1) < 0.02, "%s: wall %g, closed form %g", modes[k], surf[0], L_wall);
+        /* Pixels vary by the method's own error at this setting (a few
+         * percent between neighbouring elements); a crack in the map back
+         * would be a pixel far off (black, or a value from elsewhere). */
+        double lo = INFINITY, hi = 0, mean = 0;
+        for (size_t i = 0; i < npx; i++) {
+            lo = fmin(lo, img[i]);
+            hi = fmax(hi, img[i]);
+            mean += img[i] / (double)npx;
+        }
+        cr_assert(fabs(mean / L_wall - 1) < 0.02, "%s: mean pixel %g, closed form %g", modes[k], mean, L_wall);
+        cr_assert(lo > 0.85 * L_wall && hi < 1.15 * L_wall, "%s: pixels %g .. %g, closed form %g", modes[k], lo,
+                  hi, L_wall);
+    }
+    free(img);
+    rp_scene_destroy(scene);
+    tmesh_free(&wall);
+    tmesh_free(&cap);
+    unlink(wall_path);
+    unlink(cap_path);
+    rmdir(dir);
+}
+
+/* With a tolerance alone, collapses stop before the quadric error (a sum of
+ * squared distances to the original planes, at least the largest one)
+ * passes tolerance^2: the surface moves by about the tolerance, not more
+ * than a few times it, and the mesh gets coarser the looser it is. */
+Test(simplify, tolerance_bounds_the_distance)
+{
+    tmesh m = uv_sphere(64, 40, 0, 40, 0);
+    size_t prev = m.nt + 1;
+    const double tol[] = {1e-3, 4e-3, 1.6e-2};
+    for (int k = 0; k < 3; k++) {
+        rp_simplified s;
+        char msg[256] = "";
+        rp_simplify_params p = {.ratio = 1, .tolerance = tol[k]};
+        cr_assert_eq(rp_cgal_simplify(m.xyz, m.nv, m.tri, m.nt, &p, &s, msg, sizeof msg), 0, "%s", msg);
+        cr_assert(s.max_distance_in < 3 * tol[k] && s.max_distance_out < 3 * tol[k], "tolerance %g: %g, %g", tol[k],
+                  s.max_distance_in, s.max_distance_out);
+        cr_assert(s.ntriangles < prev, "tolerance %g: %zu triangles", tol[k], s.ntriangles);
+        prev = s.ntriangles;
+        rp_simplified_free(&s);
+    }
+    cr_assert(prev < m.nt / 4, "%zu of %zu", prev, m.nt);
+    tmesh_free(&m);
+}
+
+Test(simplify, bad_option_named)
+{
+    rp_scene *scene = rp_test_load("scenes/cornell.scene");
+    const char *bad[] = {"2", "0", "half", "-0.5", ""};
+    for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
+        const char *keys[] = {"simplify"}, *vals[] = {bad[k]};
+        rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .keys = keys, .values = vals, .count = 1};
+        rp_solver *s = NULL;
+        rp_error err = {""};
+        cr_assert_eq(rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, &err), RP_ERR_INPUT, "'%s'", bad[k]);
+        cr_assert(strstr(err.message, "--simplify") && strstr(err.message, "off, auto"), "%s", err.message);
+    }
+    /* No dense mesh in the Cornell box: auto solves the scene as it is. */
+    const char *keys[] = {"simplify"}, *vals[] = {"auto"};
+    rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .keys = keys, .values = vals, .count = 1};
+    rp_solver *s = NULL;
+    rp_error err = {""};
+    cr_assert_eq(rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, &err), RP_OK, "%s", err.message);
+    rp_hier_stats st;
+    rp_hierarchical_stats(rp_solver_state(s), &st);
+    cr_assert_eq(st.nodes, rp_scene_nfaces(scene)); /* one root per face, as without it */
+    rp_solver_destroy(s);
+    rp_scene_destroy(scene);
+}
