@@ -330,3 +330,50 @@ Test(experiments, discontinuity_quick_form_holds_its_claim, .timeout = 900)
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", root);
     cr_expect_eq(system(cmd), 0);
 }
+
+/* The row of methods.csv for scene and method label. */
+static const char *ms_row(const char *csv, const char *scene, const char *label)
+{
+    char key[128];
+    snprintf(key, sizeof key, "\n%s,%s,", scene, label);
+    const char *hit = strstr(csv, key);
+    cr_assert_not_null(hit, "methods.csv: no row %s", key + 1);
+    return hit + 1;
+}
+
+/* modelsize: on a simplified solution mesh (--simplify auto) hierarchical
+ * radiosity solves on far fewer faces with less memory, and its surface
+ * averages stay as close to the path-traced reference as the full mesh's
+ * (within half a percentage point); the bunny's within 1% at the quick
+ * form's fast setting.  Growth: four times the faces (the same surface,
+ * subdivided) costs the simplified solve under 1.5 times the memory. */
+Test(experiments, modelsize_quick_form_holds_its_claim, .timeout = 900)
+{
+    char root[64], cache[96];
+    snprintf(root, sizeof root, "/tmp/rp_exp_XXXXXX");
+    cr_assert_not_null(mkdtemp(root));
+    snprintf(cache, sizeof cache, "%s/refs", root);
+    run_quick("modelsize", root, cache);
+    char *csv = read_out(root, "modelsize", "methods.csv");
+    /* columns: scene,method,seconds,memory_mib,faces,leaves,links,cluster_links,max_surface_err,worst */
+    const char *full = ms_row(csv, "elephant", "hierarchical");
+    const char *simp = ms_row(csv, "elephant", "hierarchical:simplify=auto");
+    const char *bunny = ms_row(csv, "bunny", "hierarchical:simplify=auto");
+    cr_expect(field(simp, 4) < 0.7 * field(full, 4), "faces %g against %g", field(simp, 4), field(full, 4));
+    cr_expect(field(simp, 3) < field(full, 3), "memory %g against %g MiB", field(simp, 3), field(full, 3));
+    cr_expect(field(simp, 8) < field(full, 8) + 0.005, "error %g against %g", field(simp, 8), field(full, 8));
+    cr_expect(field(bunny, 4) < 0.15 * 75415, "bunny solved on %g faces", field(bunny, 4));
+    cr_expect(field(bunny, 8) < 0.01, "bunny: largest surface error %g", field(bunny, 8));
+    free(csv);
+    char *grow = read_out(root, "modelsize", "growth.csv");
+    /* faces,hr_seconds,hr_memory_mib,hr_faces_solved,hr_links,hr_max_surface_err,pt_seconds,... */
+    const char *pub = strstr(grow, "\n5558,"), *sub = strstr(grow, "\n22232,");
+    cr_assert(pub && sub, "%s", grow);
+    cr_expect(field(sub + 1, 2) < 1.5 * field(pub + 1, 2), "memory %g MiB at 22232 faces, %g at 5558",
+              field(sub + 1, 2), field(pub + 1, 2));
+    cr_expect(field(sub + 1, 5) < 0.03, "error at 22232 faces %g", field(sub + 1, 5));
+    free(grow);
+    char cmd[128];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", root);
+    cr_expect_eq(system(cmd), 0);
+}

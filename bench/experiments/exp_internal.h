@@ -106,4 +106,7 @@ rp_status rp_exp_stability(const rp_experiment_params *p, rp_error *err);
 /* radpt experiment realscenes (exp_realscenes.c). */
 rp_status rp_exp_realscenes(const rp_experiment_params *p, rp_error *err);
 
+/* radpt experiment modelsize (exp_modelsize.c). */
+rp_status rp_exp_modelsize(const rp_experiment_params *p, rp_error *err);
+
 #endif

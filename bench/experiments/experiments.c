@@ -533,12 +533,22 @@ static const rp_experiment experiments[] = {
      .quick = {8.0, 0, 16, NULL},
      .full = {60.0, 0, 256, NULL},
      .run = rp_exp_realscenes},
+    {.name = "modelsize",
+     .summary = "scanned meshes: surface-average error against time and memory for the path tracer and "
+                "hierarchical radiosity on full and simplified meshes, and growth with the face count",
+     .scenes = "scenes/bunny.scene, scenes/real/elephant-box.scene, scenes/real/armadillo-box.scene (full form), and "
+               "the bunny at 3,000 to 1.2 million faces (CGAL simplifications and midpoint subdivisions)",
+     .claim = "solving on a simplified mesh (--simplify auto) keeps the largest surface-average error within half a "
+              "percentage point of the full mesh's solve on a fraction of its faces and memory, and its memory grows "
+              "far slower than the face count (fitted log-log slopes with 95% intervals)",
+     .own_units = 1,
+     .run = rp_exp_modelsize},
 };
 
 static const rp_experiment *const experiment_list[] = {&experiments[0], &experiments[1], &experiments[2],
                                                        &experiments[3], &experiments[4], &experiments[5],
                                                        &experiments[6], &experiments[7], &experiments[8],
-                                                       &experiments[9], NULL};
+                                                       &experiments[9], &experiments[10], NULL};
 
 const rp_experiment *const *rp_experiments(void) { return experiment_list; }
 

@@ -594,6 +594,7 @@ static void stats_fill(const hier_state *s, rp_hier_stats *o)
     o->cluster_links_refined = s->clinks_refined;
     o->cluster_links_culled = s->clinks_culled;
     o->initial_links = s->links_initial + s->clinks_initial;
+    o->faces = s->nfaces;
 }
 
 static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)

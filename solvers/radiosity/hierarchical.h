@@ -41,6 +41,7 @@ typedef struct rp_hier_stats {
     size_t cluster_links_refined; /* cluster links replaced by finer ones so far */
     size_t cluster_links_culled;  /* dropped: normal cones show nothing can pass */
     size_t initial_links;     /* face plus cluster links after the first linking */
+    size_t faces;             /* faces solved on: the scene's, or fewer with --simplify */
 } rp_hier_stats;
 
 void rp_hierarchical_stats(const void *state, rp_hier_stats *out);
