@@ -4,6 +4,7 @@
 
 #include "../geometry/hash.h"
 #include "../geometry/raycast.h"
+#include "../geometry/simplify.h"
 
 #include <errno.h>
 #include <stddef.h>
@@ -353,4 +354,20 @@ const char *rp_solver_samples_name(const rp_solver_type *type)
 int rp_options_cancelled(const rp_options *o)
 {
     return o && rp_cancelled(o->cancel);
+}
+
+rp_status rp_options_simplify(const rp_options *o, const rp_scene *scene, struct rp_solution **out, rp_error *err)
+{
+    *out = NULL;
+    const char *sm = rp_options_word(o, "simplify");
+    if (!sm || strcmp(sm, "off") == 0)
+        return RP_OK;
+    double ratio = 0;
+    if (strcmp(sm, "auto") != 0) {
+        char *end = NULL;
+        ratio = strtod(sm, &end);
+        if (end == sm || *end || !(ratio > 0 && ratio < 1))
+            return rp_error_set(err, RP_ERR_INPUT, "--simplify: '%s' is not off, auto or a fraction in (0, 1)", sm);
+    }
+    return rp_solution_create(scene, ratio, 0, out, o ? o->log : NULL, o ? o->log_ctx : NULL, err);
 }

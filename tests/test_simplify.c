@@ -13,7 +13,8 @@
  *     area Ac emitting E and reflectance rho everywhere, the irradiance is
  *     the same at every point, H = E Ac / (A (1 - rho)), and the wall's
  *     radiosity is rho H.  A sphere of flat facets holds this to O(h^2).
- *     Solved on the full wall and on its simplification, the surface
+ *     Solved by hierarchical radiosity on the full wall and on its
+ *     simplification, and by Gauss-Seidel on the simplification, the surface
  *     average and every pixel of an image of the wall (which goes through
  *     the map back to the full mesh: a crack would be a dark pixel) must
  *     match it. */
@@ -275,14 +276,17 @@ static void keep_log(void *ctx, const char *msg)
 
 /* Wall and lamp average radiance and the image, solved by hierarchical
  * radiosity with --simplify `mode`. */
-static void solve_sphere(const rp_scene *scene, const char *mode, double *surf, float *img)
+static void solve_sphere(const rp_scene *scene, const rp_solver_type *type, const char *mode, double *surf,
+                         float *img)
 {
-    const char *keys[] = {"simplify", "bf-epsilon", "spp"}, *vals[] = {mode, "0.02", "4"};
+    int hr = type == &rp_solver_hierarchical;
+    const char *keys[] = {"simplify", "spp", hr ? "bf-epsilon" : "reconstruct"},
+               *vals[] = {mode, "4", hr ? "0.02" : "gouraud"};
     rp_options o = {.size = sizeof o, .want = RP_WANT_IMAGE | RP_WANT_SURFACES, .seed = 3, .threads = 0,
                     .keys = keys, .values = vals, .count = 3, .log = keep_log};
     rp_solver *s = NULL;
     rp_error err = {""};
-    cr_assert_eq(rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(rp_solver_create(type, scene, &o, &s, &err), RP_OK, "%s", err.message);
     for (int k = 0;; k++) {
         rp_step_info info;
         memset(&info, 0, sizeof info);
@@ -343,10 +347,16 @@ Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
     const size_t npx = 24 * 24;
     float *img = malloc(npx * sizeof *img);
     double surf[2];
-    const char *modes[] = {"off", "0.3"};
-    for (int k = 0; k < 2; k++) {
-        solve_sphere(scene, modes[k], surf, img);
-        cr_assert(fabs(surf[0] / L_wall - 1) < 0.02, "%s: wall %g, closed form %g", modes[k], surf[0], L_wall);
+    /* hierarchical radiosity on the full and the simplified wall, and
+     * Gauss-Seidel (default mesh, Gouraud image) on the simplified one */
+    const rp_solver_type *gs = rp_solver_lookup("gauss-seidel");
+    cr_assert_not_null(gs);
+    const rp_solver_type *types[] = {&rp_solver_hierarchical, &rp_solver_hierarchical, gs};
+    const char *modes[] = {"off", "0.3", "0.3"};
+    for (int k = 0; k < 3; k++) {
+        solve_sphere(scene, types[k], modes[k], surf, img);
+        cr_assert(fabs(surf[0] / L_wall - 1) < 0.02, "%s %s: wall %g, closed form %g", types[k]->name, modes[k], surf[0],
+                  L_wall);
         /* Pixels vary by the method's own error at this setting (a few
          * percent between neighbouring elements); a crack in the map back
          * would be a pixel far off (black, or a value from elsewhere). */
@@ -356,9 +366,10 @@ Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
             hi = fmax(hi, img[i]);
             mean += img[i] / (double)npx;
         }
-        cr_assert(fabs(mean / L_wall - 1) < 0.02, "%s: mean pixel %g, closed form %g", modes[k], mean, L_wall);
-        cr_assert(lo > 0.85 * L_wall && hi < 1.15 * L_wall, "%s: pixels %g .. %g, closed form %g", modes[k], lo,
-                  hi, L_wall);
+        cr_assert(fabs(mean / L_wall - 1) < 0.02, "%s %s: mean pixel %g, closed form %g", types[k]->name, modes[k], mean,
+                  L_wall);
+        cr_assert(lo > 0.85 * L_wall && hi < 1.15 * L_wall, "%s %s: pixels %g .. %g, closed form %g", types[k]->name,
+                  modes[k], lo, hi, L_wall);
     }
     free(img);
     rp_scene_destroy(scene);
@@ -397,14 +408,17 @@ Test(simplify, bad_option_named)
 {
     rp_scene *scene = rp_test_load("scenes/cornell.scene");
     const char *bad[] = {"2", "0", "half", "-0.5", ""};
-    for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
-        const char *keys[] = {"simplify"}, *vals[] = {bad[k]};
-        rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .keys = keys, .values = vals, .count = 1};
-        rp_solver *s = NULL;
-        rp_error err = {""};
-        cr_assert_eq(rp_solver_create(&rp_solver_hierarchical, scene, &o, &s, &err), RP_ERR_INPUT, "'%s'", bad[k]);
-        cr_assert(strstr(err.message, "--simplify") && strstr(err.message, "off, auto"), "%s", err.message);
-    }
+    const char *methods[] = {"hierarchical", "gauss-seidel", "southwell", "stochastic-jacobi"};
+    for (size_t m = 0; m < 4; m++)
+        for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
+            const char *keys[] = {"simplify"}, *vals[] = {bad[k]};
+            rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .keys = keys, .values = vals, .count = 1};
+            rp_solver *s = NULL;
+            rp_error err = {""};
+            cr_assert_eq(rp_solver_create(rp_solver_lookup(methods[m]), scene, &o, &s, &err), RP_ERR_INPUT, "%s '%s'",
+                         methods[m], bad[k]);
+            cr_assert(strstr(err.message, "--simplify") && strstr(err.message, "off, auto"), "%s", err.message);
+        }
     /* No dense mesh in the Cornell box: auto solves the scene as it is. */
     const char *keys[] = {"simplify"}, *vals[] = {"auto"};
     rp_options o = {.size = sizeof o, .want = RP_WANT_SURFACES, .keys = keys, .values = vals, .count = 1};

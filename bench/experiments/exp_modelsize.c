@@ -40,7 +40,7 @@
 
 #define MS_AREA_SHARE 0.02
 #define MS_MAXSCENES 3
-#define MS_MAXMETHODS 4
+#define MS_MAXMETHODS 5
 #define MS_MAXSIZES 6
 #define MS_NUM 6 /* seconds, MiB, faces, leaves, links, cluster links */
 
@@ -66,6 +66,7 @@ static const ms_method ms_methods[MS_MAXMETHODS] = {
     {"hierarchical", "hierarchical, full mesh", "hierarchical", ""},
     {"hierarchical:simplify=auto", "hierarchical, simplify auto", "hierarchical", "simplify=auto"},
     {"hierarchical:simplify=0.02", "hierarchical, simplify 0.02", "hierarchical", "simplify=0.02"},
+    {"gauss-seidel:simplify=0.02", "Gauss-Seidel, simplify 0.02", "gauss-seidel", "simplify=0.02"},
 };
 
 /* The quick form's hierarchical setting (the fast one of README). */
@@ -126,7 +127,8 @@ static rp_status ms_solve(const rp_experiment_params *p, const rp_scene *scene, 
     if (st == RP_OK) {
         v[0] = tot.wall_s;
         v[1] = tot.last.memory / (1 << 20);
-        v[2] = (double)rp_scene_nfaces(scene);
+        /* faces solved on: known for the path tracer (all) and hierarchical radiosity */
+        v[2] = strcmp(type_name, "pathtrace") == 0 ? (double)rp_scene_nfaces(scene) : NAN;
         v[3] = v[4] = v[5] = NAN;
         if (t == &rp_solver_hierarchical) {
             rp_hier_stats hs;
@@ -394,11 +396,11 @@ rp_status rp_exp_modelsize(const rp_experiment_params *p, rp_error *err)
         }
         for (size_t m = 0; m < MS_MAXMETHODS && st == RP_OK; m++) {
             const ms_method *mm = &ms_methods[m];
-            if (p->quick && si == 0 && m == 1)
-                continue; /* the bunny's full mesh: 35-60 s, full form only */
-            int hr = strcmp(mm->type, "hierarchical") == 0;
+            if (p->quick && ((si == 0 && m == 1) || m == 4))
+                continue; /* the bunny's full mesh (35-60 s), Gauss-Seidel: full form only */
+            int hr = strcmp(mm->type, "hierarchical") == 0, gs = strcmp(mm->type, "gauss-seidel") == 0;
             char opts[256];
-            snprintf(opts, sizeof opts, "%s%s%s", hr ? mm->options : pt_opts,
+            snprintf(opts, sizeof opts, "%s%s%s", hr || gs ? mm->options : pt_opts,
                      hr && *mm->options && *hr_extra ? ":" : "", hr ? hr_extra : "");
             char key[512];
             snprintf(key, sizeof key, "modelsize %s %s %s", ms_scenes[si].id, mm->type, opts);

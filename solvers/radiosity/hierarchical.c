@@ -91,12 +91,7 @@ static const rp_option_spec hier_options[] = {
      "with clustering, links to elements and clusters smaller than FRAC x the area of the faces "
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
      "1e-3"},
-    {"simplify", "off|auto|R",
-     "solve on a simplified copy of each triangle mesh of at least 1000 triangles (CGAL edge collapse, "
-     "Garland-Heckbert quadrics; borders kept): auto collapses while the quadric error stays below 0.1% "
-     "of the scene's diagonal, R in (0,1) keeps that fraction of the edges; camera rays and final "
-     "gathers still see the full meshes",
-     "off"},
+    RP_SIMPLIFY_OPTION,
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
     {"vertex-rays", "N",
@@ -252,21 +247,10 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     rp_status st;
     /* --simplify first: everything below reads the scene solved on. */
     s->view = scene;
-    const char *sm = rp_options_word(o, "simplify");
-    if (sm && strcmp(sm, "off") != 0) {
-        double ratio = 0;
-        if (strcmp(sm, "auto") != 0) {
-            char *end = NULL;
-            ratio = strtod(sm, &end);
-            if (end == sm || *end || !(ratio > 0 && ratio < 1))
-                return rp_error_set(err, RP_ERR_INPUT,
-                                    "--simplify: '%s' is not off, auto or a fraction in (0, 1)", sm);
-        }
-        if ((st = rp_solution_create(scene, ratio, 0, &s->sol, o ? o->log : NULL, o ? o->log_ctx : NULL, err)) !=
-            RP_OK)
-            return st;
+    if ((st = rp_options_simplify(o, scene, &s->sol, err)) != RP_OK)
+        return st;
+    if (s->sol)
         scene = rp_solution_scene(s->sol);
-    }
     s->scene = scene;
     s->nb = rp_scene_nbands(scene);
     s->nfaces = rp_scene_nfaces(scene);

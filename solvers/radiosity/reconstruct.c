@@ -284,7 +284,59 @@ typedef struct recon_job {
     const double *B;        /* elements x nb */
     const double *CB;       /* elements x 4 corners x nb (gouraud) */
     rp_recon_gather gather; /* (gather) */
+    double *vtx;            /* --simplify: the solution at the full mesh's vertices */
 } recon_job;
+
+/* B at point p of face `face` of the mesh's scene: the element's value. */
+static void eval_flat(const void *ctx, uint32_t face, rp_vec3 p, double *B)
+{
+    const recon_job *j = ctx;
+    uint32_t e = rp_mesh_locate(j->mesh, face, p);
+    for (size_t b = 0; b < j->nb; b++)
+        B[b] = e == RP_NONE ? 0 : j->B[(size_t)e * j->nb + b];
+}
+
+/* B there interpolated from the element's corners. */
+static void eval_gouraud(const void *ctx, uint32_t face, rp_vec3 p, double *B)
+{
+    const recon_job *j = ctx;
+    uint32_t e = rp_mesh_locate(j->mesh, face, p);
+    for (size_t b = 0; b < j->nb; b++)
+        B[b] = 0;
+    if (e == RP_NONE)
+        return;
+    double w[4];
+    rp_mesh_element_weights(j->mesh, e, p, w);
+    for (uint32_t k = 0; k < j->el[e].nverts; k++)
+        for (size_t b = 0; b < j->nb; b++)
+            B[b] += w[k] * j->CB[((size_t)e * 4 + k) * j->nb + b];
+}
+
+/* --simplify: radiance leaving the front of a full face hit. */
+static void recon_shade_mapped(const void *ctx, const rp_hit *h, uint64_t key, double *xy_gather, uint32_t *perm,
+                               double *L, unsigned long long *rays)
+{
+    const recon_job *j = ctx;
+    for (size_t b = 0; b < j->nb; b++)
+        L[b] = 0;
+    if (!h->front)
+        return;
+    if (j->p->mode == RP_RECON_GATHER) {
+        rp_recon_final_gather(&j->gather, h, key, xy_gather, perm, L, rays);
+        return;
+    }
+    rp_solution_eval(j->p->sol, j->nb, j->p->mode == RP_RECON_GOURAUD ? eval_gouraud : eval_flat, j, j->vtx, h->face,
+                     h->p, L);
+    for (size_t b = 0; b < j->nb; b++)
+        L[b] /= RP_PI;
+}
+
+/* --simplify: the solution at a gather ray's hit on the full scene. */
+static void mapped_radiosity(const void *ctx, const rp_hit *g, double *B)
+{
+    const recon_job *j = ctx;
+    rp_solution_eval(j->p->sol, j->nb, eval_flat, j, j->vtx, g->face, g->p, B);
+}
 
 /* Radiance leaving the front of the element hit towards the camera. */
 static void recon_shade(const void *ctx, const rp_hit *h, uint64_t key, double *xy_gather, uint32_t *perm,
@@ -436,15 +488,33 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
         }
         job.CB = CB;
     }
-    if (p->mode == RP_RECON_GATHER) {
-        if ((st = rp_recon_lights(scene, &lights, err)) != RP_OK)
-            return st;
-        job.gather = (rp_recon_gather){.scene = scene, .rc = rc, .lights = lights, .rays = p->gather_rays,
-                                       .nb = nb, .radiosity = element_radiosity, .ctx = &job};
+    /* With --simplify the camera and the gather see the full scene. */
+    const rp_scene *view = p->sol ? p->view : scene;
+    const rp_raycast *vrc = p->sol ? p->view_rc : rc;
+    if (p->sol) {
+        const size_t nv = rp_scene_nvertices(view);
+        if (!(job.vtx = calloc(nv ? nv * nb : 1, sizeof *job.vtx))) {
+            free(CB);
+            return rp_error_set(err, RP_ERR_NOMEM, "out of memory for vertex radiosities");
+        }
+        rp_solution_vertex_values(p->sol, nb, p->mode == RP_RECON_GOURAUD ? eval_gouraud : eval_flat, &job,
+                                  job.vtx);
     }
-    rp_recon_shader shader = {recon_shade, &job, p->mode == RP_RECON_GATHER ? p->gather_rays : 1};
-    st = rp_recon_camera(scene, rc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
+    if (p->mode == RP_RECON_GATHER) {
+        if ((st = rp_recon_lights(view, &lights, err)) != RP_OK) {
+            free(CB);
+            free(job.vtx);
+            return st;
+        }
+        job.gather = (rp_recon_gather){.scene = view, .rc = vrc, .lights = lights, .rays = p->gather_rays,
+                                       .nb = nb, .radiosity = p->sol ? mapped_radiosity : element_radiosity,
+                                       .ctx = &job};
+    }
+    rp_recon_shader shader = {p->sol ? recon_shade_mapped : recon_shade, &job,
+                              p->mode == RP_RECON_GATHER ? p->gather_rays : 1};
+    st = rp_recon_camera(view, vrc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
     free(CB);
+    free(job.vtx);
     rp_area_sampler_destroy(lights);
     return st;
 }

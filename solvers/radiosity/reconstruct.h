@@ -28,6 +28,7 @@
 #include "../../geometry/raycast.h"
 #include "../../geometry/sample.h"
 #include "../../geometry/scene.h"
+#include "../../geometry/simplify.h"
 
 typedef enum rp_recon_mode {
     RP_RECON_FLAT,
@@ -41,6 +42,14 @@ typedef struct rp_recon_params {
     unsigned gather_rays;  /* gather: rays per camera ray, >= 1 */
     uint64_t seed;
     int threads;           /* > 0 */
+    /* --simplify (solver.h, geometry/simplify.h): the solution lives on
+     * sol's scene (the mesh's), the camera sees `view` through view_rc; the
+     * image takes the solution at the full mesh's vertices (flat or
+     * gouraud as asked, the gather's rays the flat values) and interpolates
+     * it over the full faces.  NULL: no simplification. */
+    const struct rp_solution *sol;
+    const rp_scene *view;
+    const rp_raycast *view_rc;
 } rp_recon_params;
 
 /* Parses "flat" | "gouraud" | "gather". */

@@ -61,6 +61,11 @@ typedef struct rp_rad_config {
 typedef struct rp_rad_system {
     const char *name;
     const rp_scene *scene;
+    /* --simplify: scene is sol's (solved on), view the scene given (camera
+     * and final gathers, through view_rc); NULL / the same without it. */
+    struct rp_solution *sol;
+    const rp_scene *view;
+    rp_raycast *view_rc;
     size_t n, nb;
     /* The ranks the rows are split over (solvers/comm.h; NULL: alone).
      * Row i belongs to rank i mod K (rp_comm_owns), which alone computes
@@ -133,7 +138,8 @@ typedef struct rp_rad_system {
      "uniform"},                                                                             \
     {"mesh-segments", "N",                                                                   \
      "discontinuity mesh: D1 segments kept per face, the longest first (D0 all kept)",       \
-     RP_RAD_STR(RP_DISC_DEFAULT_MAX_PER_FACE)}
+     RP_RAD_STR(RP_DISC_DEFAULT_MAX_PER_FACE)},                                \
+    RP_SIMPLIFY_OPTION
 
 /* Option specs every classic solver takes; a method's spec array lists
  * these, then its own, then {NULL}. */
