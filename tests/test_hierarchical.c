@@ -1177,3 +1177,117 @@ Test(hier, cluster_elephant_against_pathtrace, .init = hsetup, .timeout = 600)
     free(se);
     rp_scene_destroy(scene);
 }
+
+/* ---- a cluster link against a closed form ------------------------------ */
+
+/* Lambert's point-to-polygon form factor (Cohen & Wallace 1993, eq. 4.21;
+ * written out here, not radpt's): from a differential area at p with unit
+ * normal n to the triangle (a, b, c), F = 1 / (2 pi) |sum_i theta_i
+ * n . unit(R_i x R_i+1)|, R_i the vectors from p to the vertices and
+ * theta_i the angles between them; the triangle must lie wholly above p's
+ * tangent plane (true here). */
+static double lambert_triangle(const double *p, const double *n, const double *a, const double *b, const double *c)
+{
+    const double *v[3] = {a, b, c};
+    double s = 0;
+    for (int i = 0; i < 3; i++) {
+        const double *u = v[i], *w = v[(i + 1) % 3];
+        double r0[3] = {u[0] - p[0], u[1] - p[1], u[2] - p[2]}, r1[3] = {w[0] - p[0], w[1] - p[1], w[2] - p[2]};
+        double x[3] = {r0[1] * r1[2] - r0[2] * r1[1], r0[2] * r1[0] - r0[0] * r1[2], r0[0] * r1[1] - r0[1] * r1[0]};
+        double lx = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+        double th = atan2(lx, r0[0] * r1[0] + r0[1] * r1[1] + r0[2] * r1[2]);
+        if (lx > 0)
+            s += th * (n[0] * x[0] + n[1] * x[1] + n[2] * x[2]) / lx;
+    }
+    return fabs(s) / (2 * M_PI);
+}
+
+/* A ball of 720 faces (radius 0.1, emitting Le = 1) far above a small patch
+ * (side 0.02, reflectance 0.5, facing it at distance 2), clustered, with an
+ * oracle so loose that no cluster link is refined: the patch's radiance is
+ * rho Le F, F the form factor from the patch's centre to the ball's faces
+ * (the sum of Lambert's closed form over the faces turned towards it: the
+ * faceted ball is convex, so they do not hide one another), and for every
+ * cluster of the ball the oracle's bound on the form factor from the
+ * patch to that cluster is at least the exact one. */
+Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout = 120)
+{
+    char dir[] = "/tmp/radpt-cluster-XXXXXX";
+    cr_assert(mkdtemp(dir));
+    char path[256];
+    snprintf(path, sizeof path, "%s/ball.off", dir);
+    rp_test_mesh ball = rp_test_uv_sphere(24, 16, 0, 16, 0);
+    rp_test_write_off(path, &ball);
+    const double R = 0.1, D = 2;
+    char text[1024];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial lamp reflect 0 emit 1\nmaterial grey reflect 0.5\n"
+             "mesh ball lamp %s scale %g translate 0 0 %g\n"
+             "quad patch grey -0.01 -0.01 0  0.01 -0.01 0  0.01 0.01 0  -0.01 0.01 0\n",
+             path, R, D);
+    rp_scene *scene = rp_test_parse(text);
+    const size_t nf = rp_scene_nfaces(scene);
+    const rp_face *faces = rp_scene_faces(scene);
+    const rp_vec3 *V = rp_scene_vertices(scene);
+    const uint32_t patch = rp_scene_find_surface(scene, "patch");
+    const uint32_t pf = rp_scene_surfaces(scene)[patch].first_face;
+    const double P[3] = {0, 0, 0}, N[3] = {0, 0, 1};
+    /* F from the patch's centre to face f of the ball (0 if turned away) */
+    double *Ff = calloc(nf, sizeof *Ff), Fexact = 0;
+    for (size_t f = 0; f < nf; f++) {
+        if (faces[f].surface == patch)
+            continue;
+        rp_vec3 a = V[faces[f].v[0]], b = V[faces[f].v[1]], c = V[faces[f].v[2]];
+        if (rp_v3_dot(faces[f].normal, rp_v3_sub(rp_v3(0, 0, 0), a)) <= 0)
+            continue;
+        const double A[3] = {a.x, a.y, a.z}, B[3] = {b.x, b.y, b.z}, C[3] = {c.x, c.y, c.z};
+        Ff[f] = lambert_triangle(P, N, A, B, C);
+        Fexact += Ff[f];
+    }
+    /* the faceted ball is a little smaller than the sphere: (R/D)^2 less
+     * a few percent */
+    cr_assert(Fexact < R * R / (D * D) && Fexact > 0.95 * R * R / (D * D), "F %g, sphere %g", Fexact, R * R / (D * D));
+
+    hrun r;
+    const char *kv[] = {"cluster", "on", "bf-epsilon", "1e6", "cluster-rays", "256", NULL};
+    solve_hier(&r, scene, RP_WANT_SURFACES, 2, kv);
+    const hier_state *s = r.state;
+    cr_assert(s->ncl > 0);
+    size_t checked = 0;
+    for (size_t i = 0; i < s->ncl; i++) {
+        const hier_cluster *c = &s->cl[i];
+        double Fc = 0;
+        int only_ball = 1;
+        for (uint32_t k = 0; k < c->count; k++) {
+            uint32_t f = s->cl_faces[c->first + k];
+            only_ball &= faces[f].surface != patch;
+            Fc += Ff[f];
+        }
+        if (!only_ball)
+            continue;
+        double Fb = hier_cluster_bound(s, pf, (uint32_t)i | HIER_CL_BIT);
+        if (Fb < 0) { /* dropped: nothing may pass, and nothing does */
+            cr_expect(Fc == 0, "cluster %zu dropped with F %g", i, Fc);
+            continue;
+        }
+        if (Fb == 0)
+            continue; /* touching: always split */
+        cr_expect(Fc <= Fb, "cluster %zu (%u faces): exact F %g above the bound %g", i, c->count, Fc, Fb);
+        checked++;
+    }
+    cr_expect(checked > 10, "%zu clusters checked", checked);
+    /* The transfer: sampled with 256 stratified point pairs per link and
+     * ray (hier_cluster.c node_entries): within 3% of the closed form. */
+    double surf[3];
+    rp_estimate e = {.surface_radiance = surf};
+    rp_error err = {""};
+    cr_assert_eq(r.type->estimate(r.state, &e, &err), RP_OK, "%s", err.message);
+    const double L = 0.5 * 1 * Fexact;
+    cr_expect(fabs(surf[patch] / L - 1) < 0.03, "patch radiance %g, closed form %g", surf[patch], L);
+    hrun_end(&r);
+    free(Ff);
+    rp_scene_destroy(scene);
+    rp_test_mesh_free(&ball);
+    unlink(path);
+    rmdir(dir);
+}

@@ -32,98 +32,6 @@
 #include "solvers/solver.h"
 #include "scene_util.h"
 
-/* ---- meshes made here ---- */
-
-typedef struct tmesh {
-    double *xyz;
-    uint32_t *tri;
-    size_t nv, nt;
-} tmesh;
-
-static void tmesh_free(tmesh *m)
-{
-    free(m->xyz);
-    free(m->tri);
-}
-
-static void push_tri(tmesh *m, uint32_t a, uint32_t b, uint32_t c)
-{
-    m->tri[3 * m->nt] = a;
-    m->tri[3 * m->nt + 1] = b;
-    m->tri[3 * m->nt + 2] = c;
-    m->nt++;
-}
-
-/* A unit sphere of `slices` x `stacks` (poles as fans), triangles wound
- * outward (inward when `inward`).  Rows of latitude first..last only
- * (0..stacks for the whole sphere; rows are stacks+1 rings, the poles being
- * rings of one point). */
-static tmesh uv_sphere(int slices, int stacks, int first, int last, int inward)
-{
-    tmesh m = {0};
-    size_t cap = (size_t)(stacks + 1) * (size_t)slices;
-    m.xyz = malloc(3 * cap * sizeof *m.xyz);
-    m.tri = malloc(6 * cap * sizeof *m.tri);
-    cr_assert(m.xyz && m.tri);
-    /* ring r (0 = north pole) */
-    uint32_t *ring = malloc((size_t)(stacks + 1) * sizeof *ring);
-    for (int r = first; r <= last; r++) {
-        ring[r] = (uint32_t)m.nv;
-        double th = M_PI * r / stacks;
-        int n = (r == 0 || r == stacks) ? 1 : slices;
-        for (int k = 0; k < n; k++) {
-            double ph = 2 * M_PI * k / slices;
-            m.xyz[3 * m.nv] = sin(th) * cos(ph);
-            m.xyz[3 * m.nv + 1] = cos(th);
-            m.xyz[3 * m.nv + 2] = sin(th) * sin(ph);
-            m.nv++;
-        }
-    }
-    for (int r = first; r < last; r++)
-        for (int k = 0; k < slices; k++) {
-            int k1 = (k + 1) % slices;
-            uint32_t a = ring[r] + (r == 0 ? 0 : (uint32_t)k), b = ring[r] + (r == 0 ? 0 : (uint32_t)k1);
-            uint32_t c = ring[r + 1] + (r + 1 == stacks ? 0 : (uint32_t)k),
-                     d = ring[r + 1] + (r + 1 == stacks ? 0 : (uint32_t)k1);
-            /* seen from outside, (a, c, d) and (a, d, b) are counter-clockwise
-             * when y is up and phi turns from x to z: checked below */
-            if (r != 0)
-                push_tri(&m, a, d, c), push_tri(&m, a, b, d);
-            else
-                push_tri(&m, a, d, c);
-            if (r == 0 || r + 1 == stacks) {
-                if (r + 1 == stacks) {
-                    m.nt--;
-                    m.nt--;
-                    push_tri(&m, a, b, c);
-                }
-            }
-        }
-    free(ring);
-    /* Orient every triangle by its centroid (the sphere is star-shaped
-     * about the origin), outward or inward as asked. */
-    for (size_t f = 0; f < m.nt; f++) {
-        const double *p0 = m.xyz + 3 * m.tri[3 * f], *p1 = m.xyz + 3 * m.tri[3 * f + 1],
-                     *p2 = m.xyz + 3 * m.tri[3 * f + 2];
-        double e1[3], e2[3], n[3], c[3];
-        for (int i = 0; i < 3; i++) {
-            e1[i] = p1[i] - p0[i];
-            e2[i] = p2[i] - p0[i];
-            c[i] = p0[i] + p1[i] + p2[i];
-        }
-        n[0] = e1[1] * e2[2] - e1[2] * e2[1];
-        n[1] = e1[2] * e2[0] - e1[0] * e2[2];
-        n[2] = e1[0] * e2[1] - e1[1] * e2[0];
-        double out = n[0] * c[0] + n[1] * c[1] + n[2] * c[2];
-        if ((out < 0) != (inward != 0)) {
-            uint32_t t = m.tri[3 * f + 1];
-            m.tri[3 * f + 1] = m.tri[3 * f + 2];
-            m.tri[3 * f + 2] = t;
-        }
-    }
-    return m;
-}
-
 /* Signed volume enclosed (divergence theorem: sum of det(p0, p1, p2) / 6). */
 static double volume(const double *xyz, const uint32_t *tri, size_t nt)
 {
@@ -148,7 +56,7 @@ static double tri_area(const double *xyz, const uint32_t *t)
 
 Test(simplify, sphere_to_a_tenth)
 {
-    tmesh m = uv_sphere(64, 40, 0, 40, 0);
+    rp_test_mesh m = rp_test_uv_sphere(64, 40, 0, 40, 0);
     cr_assert_eq(m.nt, 64 * 2 * 39);
     double v0 = volume(m.xyz, m.tri, m.nt);
     cr_assert(v0 > 0.97 * 4 * M_PI / 3 && v0 < 4 * M_PI / 3, "volume %g", v0);
@@ -188,13 +96,13 @@ Test(simplify, sphere_to_a_tenth)
     cr_assert(s.max_distance_out >= 0 && s.max_distance_out < 0.05);
     cr_assert_eq(s.border_edges, 0);
     rp_simplified_free(&s);
-    tmesh_free(&m);
+    rp_test_mesh_free(&m);
 }
 
 Test(simplify, flat_grid_keeps_its_outline)
 {
     const int n = 40;
-    tmesh m = {0};
+    rp_test_mesh m = {0};
     m.xyz = malloc(3 * (size_t)(n + 1) * (n + 1) * sizeof *m.xyz);
     m.tri = malloc(6 * (size_t)n * n * sizeof *m.tri);
     for (int j = 0; j <= n; j++)
@@ -207,8 +115,8 @@ Test(simplify, flat_grid_keeps_its_outline)
     for (int j = 0; j < n; j++)
         for (int i = 0; i < n; i++) {
             uint32_t a = (uint32_t)(j * (n + 1) + i), b = a + 1, c = a + (uint32_t)n + 1, d = c + 1;
-            push_tri(&m, a, b, d);
-            push_tri(&m, a, d, c);
+            rp_test_mesh_push(&m, a, b, d);
+            rp_test_mesh_push(&m, a, d, c);
         }
     rp_simplified s;
     char msg[256] = "";
@@ -235,7 +143,7 @@ Test(simplify, flat_grid_keeps_its_outline)
     cr_assert_eq(on_border, 4 * (size_t)n);
     cr_assert(s.max_distance_in < 1e-12 && s.max_distance_out < 1e-12);
     rp_simplified_free(&s);
-    tmesh_free(&m);
+    rp_test_mesh_free(&m);
 }
 
 Test(simplify, non_manifold_refused)
@@ -253,17 +161,6 @@ Test(simplify, non_manifold_refused)
 
 /* ---- radiosity inside a sphere ---- */
 
-static void write_off(const char *path, const tmesh *m)
-{
-    FILE *f = fopen(path, "w");
-    cr_assert(f, "%s", path);
-    fprintf(f, "OFF\n%zu %zu 0\n", m->nv, m->nt);
-    for (size_t i = 0; i < m->nv; i++)
-        fprintf(f, "%.17g %.17g %.17g\n", m->xyz[3 * i], m->xyz[3 * i + 1], m->xyz[3 * i + 2]);
-    for (size_t t = 0; t < m->nt; t++)
-        fprintf(f, "3 %u %u %u\n", m->tri[3 * t], m->tri[3 * t + 1], m->tri[3 * t + 2]);
-    fclose(f);
-}
 
 static char last_log[8][512];
 static int nlog;
@@ -310,9 +207,9 @@ Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
     /* 48 x 32 sphere, facing in: the top 3 rows of latitude are the lamp
      * (240 triangles, kept), the rest the wall (2736 triangles, simplified),
      * an open mesh whose border is the lamp's rim. */
-    tmesh wall = uv_sphere(48, 32, 3, 32, 1), cap = uv_sphere(48, 32, 0, 3, 1);
-    write_off(wall_path, &wall);
-    write_off(cap_path, &cap);
+    rp_test_mesh wall = rp_test_uv_sphere(48, 32, 3, 32, 1), cap = rp_test_uv_sphere(48, 32, 0, 3, 1);
+    rp_test_write_off(wall_path, &wall);
+    rp_test_write_off(cap_path, &cap);
     char text[1024];
     snprintf(text, sizeof text,
              "bands grey\nmaterial white reflect 0.5\nmaterial lamp reflect 0.5 emit 1\n"
@@ -373,8 +270,8 @@ Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
     }
     free(img);
     rp_scene_destroy(scene);
-    tmesh_free(&wall);
-    tmesh_free(&cap);
+    rp_test_mesh_free(&wall);
+    rp_test_mesh_free(&cap);
     unlink(wall_path);
     unlink(cap_path);
     rmdir(dir);
@@ -386,7 +283,7 @@ Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
  * than a few times it, and the mesh gets coarser the looser it is. */
 Test(simplify, tolerance_bounds_the_distance)
 {
-    tmesh m = uv_sphere(64, 40, 0, 40, 0);
+    rp_test_mesh m = rp_test_uv_sphere(64, 40, 0, 40, 0);
     size_t prev = m.nt + 1;
     const double tol[] = {1e-3, 4e-3, 1.6e-2};
     for (int k = 0; k < 3; k++) {
@@ -401,7 +298,7 @@ Test(simplify, tolerance_bounds_the_distance)
         rp_simplified_free(&s);
     }
     cr_assert(prev < m.nt / 4, "%zu of %zu", prev, m.nt);
-    tmesh_free(&m);
+    rp_test_mesh_free(&m);
 }
 
 Test(simplify, bad_option_named)

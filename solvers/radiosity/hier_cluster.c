@@ -407,6 +407,13 @@ static int judge(const hier_state *s, uint32_t r, uint32_t src, double *Fb)
     return 1;
 }
 
+double hier_cluster_bound(const hier_state *s, uint32_t recv, uint32_t src)
+{
+    double Fb = 0;
+    int j = judge(s, recv, src, &Fb);
+    return j < 0 ? -1 : j == 0 ? 0 : Fb;
+}
+
 /* 1 if a node may be split (its children stay above the area floor). */
 static int node_can_split(const hier_state *s, uint32_t it)
 {

@@ -306,6 +306,12 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err);
  * gathered radiosity Bg (hier_sweep, between its gather and its push). */
 void hier_cluster_gather_nodes(hier_state *s, double *Bg);
 void hier_cluster_free(hier_state *s);
+/* The oracle's bound on the form factor from any point of item recv to
+ * item src (items: quadtree nodes, or clusters with HIER_CL_BIT):
+ * min(1, A_src c_recv c_src / (pi d^2)), hier_cluster.c; 0 when the two
+ * touch (always split), -1 when nothing can pass between them.  For the
+ * tests. */
+double hier_cluster_bound(const hier_state *s, uint32_t recv, uint32_t src);
 
 /* ---- hier_image.c ---- */
 
