@@ -27,7 +27,12 @@
  * is named in a message.  How far: `ratio` keeps that fraction of the
  * edges; `auto` (ratio 0) collapses while the quadric error stays below
  * (RP_SIMPLIFY_AUTO_TOLERANCE x the scene's diagonal)^2, a bound relative
- * to the scene, so it does not depend on its size or units. */
+ * to the scene, so it does not depend on its size or units.  It does depend
+ * on the tessellation: a vertex's quadric sums the planes of every input
+ * face merged into it, so the same surface cut into four times the
+ * triangles stops a little earlier (the bunny: 7,800 triangles from its
+ * 75,408, 12,922 from a midpoint subdivision to 301,632, 20,164 from
+ * 1,206,528; measured by `radpt experiment modelsize`). */
 #ifndef RP_SIMPLIFY_H
 #define RP_SIMPLIFY_H
 
