@@ -244,17 +244,17 @@ rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_e
 /* --simplify off|auto|R: the finite-element methods may solve on a simplified
  * copy of the scene's dense triangle meshes while camera rays and final
  * gathers see the full ones (geometry/simplify.h).  rp_options_simplify
- * reads the option: *out is NULL when it is off (or absent), else the
+ * reads the option: *out is NULL when it is off, else the
  * solution mesh to solve on (rp_solution_scene), which the caller destroys
  * with rp_solution_destroy.  Messages (what each mesh became) go to
  * o->log. */
-#define RP_SIMPLIFY_OPTION                                                                   \
+#define RP_SIMPLIFY_OPTION(fallback)                                                         \
     {"simplify", "off|auto|R",                                                                \
      "solve on a simplified copy of each triangle mesh of 1000 triangles or more (CGAL edge " \
      "collapse, Garland-Heckbert quadrics; borders kept): auto collapses while the quadric "  \
      "error stays below 0.1% of the scene's diagonal, R in (0,1) keeps that fraction of the " \
      "edges; camera rays and final gathers still see the full meshes",                       \
-     "off"}
+     fallback}
 struct rp_solution;
 rp_status rp_options_simplify(const rp_options *o, const rp_scene *scene, struct rp_solution **out,
                               rp_error *err);

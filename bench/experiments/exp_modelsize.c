@@ -63,7 +63,7 @@ typedef struct ms_method {
 
 static const ms_method ms_methods[MS_MAXMETHODS] = {
     {"pathtrace", "path tracer", "pathtrace", ""},
-    {"hierarchical", "hierarchical, full mesh", "hierarchical", ""},
+    {"hierarchical:simplify=off", "hierarchical, full mesh", "hierarchical", "simplify=off"},
     {"hierarchical:simplify=auto", "hierarchical, simplify auto", "hierarchical", "simplify=auto"},
     {"hierarchical:simplify=0.02", "hierarchical, simplify 0.02", "hierarchical", "simplify=0.02"},
     {"gauss-seidel:simplify=0.02", "Gauss-Seidel, simplify 0.02", "gauss-seidel", "simplify=0.02"},

@@ -91,7 +91,7 @@ static const rp_option_spec hier_options[] = {
      "with clustering, links to elements and clusters smaller than FRAC x the area of the faces "
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
      "1e-3"},
-    RP_SIMPLIFY_OPTION,
+    RP_SIMPLIFY_OPTION("auto"),
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
     {"vertex-rays", "N",

@@ -139,7 +139,7 @@ typedef struct rp_rad_system {
     {"mesh-segments", "N",                                                                   \
      "discontinuity mesh: D1 segments kept per face, the longest first (D0 all kept)",       \
      RP_RAD_STR(RP_DISC_DEFAULT_MAX_PER_FACE)},                                \
-    RP_SIMPLIFY_OPTION
+    RP_SIMPLIFY_OPTION("off")
 
 /* Option specs every classic solver takes; a method's spec array lists
  * these, then its own, then {NULL}. */
