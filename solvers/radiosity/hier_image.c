@@ -612,8 +612,8 @@ static void shade(const void *ctx, const rp_hit *h, uint64_t key, double *xyg, u
         return;
     }
     const rp_solution_eval_fn eval = s->recon == HIER_RECON_FLAT ? eval_flat : eval_gouraud;
-    if (s->sol) /* h is on the full scene */
-        rp_solution_eval(s->sol, nb, eval, j, j->vtx, h->face, h->p, L);
+    if (s->view.sol) /* h is on the full scene */
+        rp_solution_eval(s->view.sol, nb, eval, j, j->vtx, h->face, h->p, L);
     else
         eval(j, h->face, h->p, L);
     for (size_t b = 0; b < nb; b++)
@@ -625,15 +625,15 @@ static void shade(const void *ctx, const rp_hit *h, uint64_t key, double *xyg, u
 static void leaf_radiosity(const void *ctx, const rp_hit *g, double *B)
 {
     const img_job *j = ctx;
-    if (j->s->sol)
-        rp_solution_eval(j->s->sol, j->s->nb, eval_flat, j, j->vtx, g->face, g->p, B);
+    if (j->s->view.sol)
+        rp_solution_eval(j->s->view.sol, j->s->nb, eval_flat, j, j->vtx, g->face, g->p, B);
     else
         eval_flat(j, g->face, g->p, B);
 }
 
 rp_status hier_image(const hier_state *s, float *out, float *variance, double *rays, rp_error *err)
 {
-    if (!rp_scene_camera(s->view))
+    if (!rp_scene_camera(s->view.scene))
         return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
     const size_t nb = s->nb;
     img_job job = {.s = s};
@@ -645,26 +645,27 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
         job.hv = hv;
         *rays += hv->rays;
     }
-    if (s->sol) {
-        const size_t nv = rp_scene_nvertices(s->view);
+    if (s->view.sol) {
+        const size_t nv = rp_scene_nvertices(s->view.scene);
         if (!(job.vtx = calloc(nv ? nv * nb : 1, sizeof *job.vtx))) {
             hier_vertices_destroy(hv);
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory");
         }
-        rp_solution_vertex_values(s->sol, nb, s->recon == HIER_RECON_GOURAUD ? eval_gouraud : eval_flat, &job,
+        rp_solution_vertex_values(s->view.sol, nb, s->recon == HIER_RECON_GOURAUD ? eval_gouraud : eval_flat, &job,
                                   job.vtx);
     }
     rp_area_sampler *lights = NULL;
     if (s->recon == HIER_RECON_GATHER) {
-        if ((st = rp_recon_lights(s->view, &lights, err)) != RP_OK) {
+        if ((st = rp_recon_lights(s->view.scene, &lights, err)) != RP_OK) {
             free(job.vtx);
             return st;
         }
-        job.gather = (rp_recon_gather){.scene = s->view, .rc = s->view_rc, .lights = lights, .rays = s->gather_rays,
-                                       .nb = nb, .radiosity = leaf_radiosity, .ctx = &job};
+        job.gather = (rp_recon_gather){.scene = s->view.scene, .rc = s->view.rc, .lights = lights,
+                                       .rays = s->gather_rays, .nb = nb, .radiosity = leaf_radiosity, .ctx = &job};
     }
     const rp_recon_shader shader = {shade, &job, s->recon == HIER_RECON_GATHER ? s->gather_rays : 1};
-    st = rp_recon_camera(s->view, s->view_rc, s->spp, s->seed, s->threads, nb, &shader, out, variance, rays, err);
+    st = rp_recon_camera(s->view.scene, s->view.rc, s->spp, s->seed, s->threads, nb, &shader, out, variance, rays,
+                         err);
     hier_vertices_destroy(hv);
     rp_area_sampler_destroy(lights);
     free(job.vtx);

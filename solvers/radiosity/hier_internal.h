@@ -13,6 +13,7 @@
 #include "../../geometry/raycast.h"
 #include "../../geometry/scene.h"
 #include "../../geometry/simplify.h"
+#include "reconstruct.h"
 #include "../solver.h"
 #include "hierarchical.h"
 
@@ -138,13 +139,10 @@ typedef enum hier_recon {
 
 typedef struct hier_state {
     const rp_scene *scene;
-    /* --simplify: scene is sol's (a coarser copy of view); camera rays and
-     * final gathers see view, the scene given, through view_rc, and the
-     * solution reaches its points through rp_solution_eval.  Without it
-     * sol is NULL and view == scene, view_rc == rc. */
-    rp_solution *sol;
-    const rp_scene *view;
-    rp_raycast *view_rc;
+    /* --simplify (reconstruct.h): scene is view.sol's, a coarser copy of
+     * view.scene, which camera rays and final gathers see through view.rc;
+     * the solution reaches their points through rp_solution_eval. */
+    rp_recon_view view;
     size_t nb, nfaces;
     int threads;
     unsigned want;

@@ -127,9 +127,7 @@ static void hier_fini(void *state)
 {
     hier_state *s = state;
     rp_raycast_destroy(s->rc);
-    if (s->view_rc != s->rc)
-        rp_raycast_destroy(s->view_rc);
-    rp_solution_destroy(s->sol);
+    rp_recon_view_fini(&s->view);
     free(s->faces);
     free(s->nodes);
     free(s->B);
@@ -246,11 +244,8 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     memset(s, 0, sizeof *s);
     rp_status st;
     /* --simplify first: everything below reads the scene solved on. */
-    s->view = scene;
-    if ((st = rp_options_simplify(o, scene, &s->sol, err)) != RP_OK)
+    if ((st = rp_recon_view_init(&s->view, o, scene, &scene, err)) != RP_OK)
         return st;
-    if (s->sol)
-        scene = rp_solution_scene(s->sol);
     s->scene = scene;
     s->nb = rp_scene_nbands(scene);
     s->nfaces = rp_scene_nfaces(scene);
@@ -380,9 +375,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         return st;
     if ((st = rp_options_ray_offset(o, s->rc, err)) != RP_OK)
         return st;
-    s->view_rc = s->rc;
-    if (s->sol && ((st = rp_raycast_create(s->view, NULL, &s->view_rc, err)) != RP_OK ||
-                   (st = rp_options_ray_offset(o, s->view_rc, err)) != RP_OK))
+    if ((st = rp_recon_view_rays(&s->view, o, s->rc, err)) != RP_OK)
         return st;
     if ((st = hier_nodes_init(s, err)) != RP_OK)
         return st;

@@ -325,7 +325,7 @@ static void recon_shade_mapped(const void *ctx, const rp_hit *h, uint64_t key, d
         rp_recon_final_gather(&j->gather, h, key, xy_gather, perm, L, rays);
         return;
     }
-    rp_solution_eval(j->p->sol, j->nb, j->p->mode == RP_RECON_GOURAUD ? eval_gouraud : eval_flat, j, j->vtx, h->face,
+    rp_solution_eval(j->p->view.sol, j->nb, j->p->mode == RP_RECON_GOURAUD ? eval_gouraud : eval_flat, j, j->vtx, h->face,
                      h->p, L);
     for (size_t b = 0; b < j->nb; b++)
         L[b] /= RP_PI;
@@ -335,7 +335,7 @@ static void recon_shade_mapped(const void *ctx, const rp_hit *h, uint64_t key, d
 static void mapped_radiosity(const void *ctx, const rp_hit *g, double *B)
 {
     const recon_job *j = ctx;
-    rp_solution_eval(j->p->sol, j->nb, eval_flat, j, j->vtx, g->face, g->p, B);
+    rp_solution_eval(j->p->view.sol, j->nb, eval_flat, j, j->vtx, g->face, g->p, B);
 }
 
 /* Radiance leaving the front of the element hit towards the camera. */
@@ -489,15 +489,15 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
         job.CB = CB;
     }
     /* With --simplify the camera and the gather see the full scene. */
-    const rp_scene *view = p->sol ? p->view : scene;
-    const rp_raycast *vrc = p->sol ? p->view_rc : rc;
-    if (p->sol) {
+    const rp_scene *view = p->view.sol ? p->view.scene : scene;
+    const rp_raycast *vrc = p->view.sol ? p->view.rc : rc;
+    if (p->view.sol) {
         const size_t nv = rp_scene_nvertices(view);
         if (!(job.vtx = calloc(nv ? nv * nb : 1, sizeof *job.vtx))) {
             free(CB);
             return rp_error_set(err, RP_ERR_NOMEM, "out of memory for vertex radiosities");
         }
-        rp_solution_vertex_values(p->sol, nb, p->mode == RP_RECON_GOURAUD ? eval_gouraud : eval_flat, &job,
+        rp_solution_vertex_values(p->view.sol, nb, p->mode == RP_RECON_GOURAUD ? eval_gouraud : eval_flat, &job,
                                   job.vtx);
     }
     if (p->mode == RP_RECON_GATHER) {
@@ -507,14 +507,47 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
             return st;
         }
         job.gather = (rp_recon_gather){.scene = view, .rc = vrc, .lights = lights, .rays = p->gather_rays,
-                                       .nb = nb, .radiosity = p->sol ? mapped_radiosity : element_radiosity,
+                                       .nb = nb, .radiosity = p->view.sol ? mapped_radiosity : element_radiosity,
                                        .ctx = &job};
     }
-    rp_recon_shader shader = {p->sol ? recon_shade_mapped : recon_shade, &job,
+    rp_recon_shader shader = {p->view.sol ? recon_shade_mapped : recon_shade, &job,
                               p->mode == RP_RECON_GATHER ? p->gather_rays : 1};
     st = rp_recon_camera(view, vrc, p->spp, p->seed, p->threads, nb, &shader, out, variance, rays, err);
     free(CB);
     free(job.vtx);
     rp_area_sampler_destroy(lights);
     return st;
+}
+
+rp_status rp_recon_view_init(rp_recon_view *v, const rp_options *o, const rp_scene *scene, const rp_scene **solve,
+                             rp_error *err)
+{
+    v->scene = scene;
+    v->rc = NULL;
+    *solve = scene;
+    rp_status st = rp_options_simplify(o, scene, &v->sol, err);
+    if (st == RP_OK && v->sol)
+        *solve = rp_solution_scene(v->sol);
+    return st;
+}
+
+rp_status rp_recon_view_rays(rp_recon_view *v, const rp_options *o, rp_raycast *rc, rp_error *err)
+{
+    if (!v->sol) {
+        v->rc = rc;
+        return RP_OK;
+    }
+    rp_status st = rp_raycast_create(v->scene, NULL, &v->rc, err);
+    if (st == RP_OK)
+        st = rp_options_ray_offset(o, v->rc, err);
+    return st;
+}
+
+void rp_recon_view_fini(rp_recon_view *v)
+{
+    if (v->sol) {
+        rp_raycast_destroy(v->rc);
+        rp_solution_destroy(v->sol);
+    }
+    memset(v, 0, sizeof *v);
 }

@@ -29,6 +29,7 @@
 #include "../../geometry/sample.h"
 #include "../../geometry/scene.h"
 #include "../../geometry/simplify.h"
+#include "../solver.h"
 
 typedef enum rp_recon_mode {
     RP_RECON_FLAT,
@@ -36,20 +37,36 @@ typedef enum rp_recon_mode {
     RP_RECON_GATHER
 } rp_recon_mode;
 
+/* --simplify (solver.h, geometry/simplify.h) for a finite-element method:
+ * the solution lives on sol's scene, the camera and final gathers see
+ * `scene`, the scene given, through rc.  Without it sol is NULL and rc is
+ * the method's own raycaster. */
+typedef struct rp_recon_view {
+    struct rp_solution *sol;
+    const rp_scene *scene;
+    rp_raycast *rc;
+} rp_recon_view;
+
+/* Reads --simplify into v (v->scene = scene) and sets *solve to the scene
+ * the method solves on: sol's, or scene itself when the option is off. */
+rp_status rp_recon_view_init(rp_recon_view *v, const rp_options *o, const rp_scene *scene, const rp_scene **solve,
+                             rp_error *err);
+/* The camera's raycaster: the method's rc, or with --simplify one over the
+ * full scene (with o's --ray-offset), owned by v. */
+rp_status rp_recon_view_rays(rp_recon_view *v, const rp_options *o, rp_raycast *rc, rp_error *err);
+/* Releases what the two made (v zeroed or half made is fine). */
+void rp_recon_view_fini(rp_recon_view *v);
+
 typedef struct rp_recon_params {
     rp_recon_mode mode;
     unsigned spp;          /* camera rays per pixel, >= 1 */
     unsigned gather_rays;  /* gather: rays per camera ray, >= 1 */
     uint64_t seed;
     int threads;           /* > 0 */
-    /* --simplify (solver.h, geometry/simplify.h): the solution lives on
-     * sol's scene (the mesh's), the camera sees `view` through view_rc; the
-     * image takes the solution at the full mesh's vertices (flat or
-     * gouraud as asked, the gather's rays the flat values) and interpolates
-     * it over the full faces.  NULL: no simplification. */
-    const struct rp_solution *sol;
-    const rp_scene *view;
-    const rp_raycast *view_rc;
+    /* --simplify: when view.sol is set the image takes the solution at the
+     * full mesh's vertices (flat or gouraud as asked, the gather's rays the
+     * flat values) and interpolates it over the full faces. */
+    rp_recon_view view;
 } rp_recon_params;
 
 /* Parses "flat" | "gouraud" | "gather". */

@@ -86,9 +86,6 @@ enum {
 
 typedef struct sj_state {
     const rp_scene *scene;
-    struct rp_solution *sol;   /* --simplify: scene is its scene; NULL without */
-    const rp_scene *view;      /* the scene given: camera and gathers */
-    rp_raycast *view_rc;
     size_t n, nb, nv;
     size_t K;                  /* replicas (--batches) */
     size_t M;                  /* rays per replica per iteration */
@@ -164,9 +161,7 @@ static const rp_option_spec sj_options[] = {
 static void sj_fini(void *state)
 {
     sj_state *s = state;
-    if (s->view_rc != s->rc)
-        rp_raycast_destroy(s->view_rc);
-    rp_solution_destroy(s->sol);
+    rp_recon_view_fini(&s->recon.view);
     rp_raycast_destroy(s->rc);
     rp_mesh_destroy(s->mesh);
     free(s->area);
@@ -253,11 +248,8 @@ static rp_status sj_init_local(void *state, const rp_scene *scene, const rp_opti
 {
     sj_state *s = state;
     rp_status st;
-    s->view = scene;
-    if ((st = rp_options_simplify(o, scene, &s->sol, err)) != RP_OK)
+    if ((st = rp_recon_view_init(&s->recon.view, o, scene, &scene, err)) != RP_OK)
         return st;
-    if (s->sol)
-        scene = rp_solution_scene(s->sol);
     s->scene = scene;
     s->nb = rp_scene_nbands(scene);
     s->want = o ? o->want : RP_WANT_IMAGE;
@@ -297,15 +289,8 @@ static rp_status sj_init_local(void *state, const rp_scene *scene, const rp_opti
         return st;
     if ((st = rp_options_ray_offset(o, s->rc, err)) != RP_OK)
         return st;
-    s->view_rc = s->rc;
-    if (s->sol) {
-        if ((st = rp_raycast_create(s->view, NULL, &s->view_rc, err)) != RP_OK ||
-            (st = rp_options_ray_offset(o, s->view_rc, err)) != RP_OK)
-            return st;
-        s->recon.sol = s->sol;
-        s->recon.view = s->view;
-        s->recon.view_rc = s->view_rc;
-    }
+    if ((st = rp_recon_view_rays(&s->recon.view, o, s->rc, err)) != RP_OK)
+        return st;
     s->el = rp_mesh_elements(s->mesh);
     s->verts = rp_mesh_vertices(s->mesh);
 

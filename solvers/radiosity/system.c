@@ -84,9 +84,7 @@ void rp_rad_log(const rp_rad_system *s, const char *fmt, ...)
 
 void rp_rad_system_fini(rp_rad_system *s)
 {
-    if (s->view_rc != s->rc)
-        rp_raycast_destroy(s->view_rc);
-    rp_solution_destroy(s->sol);
+    rp_recon_view_fini(&s->recon.view);
     if (s->scratch)
         for (int t = 0; t < s->threads; t++)
             rp_ff_scratch_destroy(s->scratch[t]);
@@ -223,11 +221,8 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
     rp_status st;
     s->name = cfg->name;
     /* --simplify first: everything below reads the scene solved on. */
-    s->view = scene;
-    if ((st = rp_options_simplify(o, scene, &s->sol, err)) != RP_OK)
+    if ((st = rp_recon_view_init(&s->recon.view, o, scene, &scene, err)) != RP_OK)
         return st;
-    if (s->sol)
-        scene = rp_solution_scene(s->sol);
     s->scene = scene;
     s->nb = rp_scene_nbands(scene);
     s->want = o ? o->want : RP_WANT_IMAGE;
@@ -278,15 +273,8 @@ rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const r
         return st;
     if ((st = rp_options_ray_offset(o, s->rc, err)) != RP_OK)
         return st;
-    s->view_rc = s->rc;
-    if (s->sol) {
-        if ((st = rp_raycast_create(s->view, NULL, &s->view_rc, err)) != RP_OK ||
-            (st = rp_options_ray_offset(o, s->view_rc, err)) != RP_OK)
-            return st;
-        s->recon.sol = s->sol;
-        s->recon.view = s->view;
-        s->recon.view_rc = s->view_rc;
-    }
+    if ((st = rp_recon_view_rays(&s->recon.view, o, s->rc, err)) != RP_OK)
+        return st;
     if ((st = rp_ff_context_create(scene, s->mesh, s->rc, &s->ffp, &s->ff, err)) != RP_OK)
         return st;
     if (rp_cancelled(s->cancel))

@@ -61,11 +61,6 @@ typedef struct rp_rad_config {
 typedef struct rp_rad_system {
     const char *name;
     const rp_scene *scene;
-    /* --simplify: scene is sol's (solved on), view the scene given (camera
-     * and final gathers, through view_rc); NULL / the same without it. */
-    struct rp_solution *sol;
-    const rp_scene *view;
-    rp_raycast *view_rc;
     size_t n, nb;
     /* The ranks the rows are split over (solvers/comm.h; NULL: alone).
      * Row i belongs to rank i mod K (rp_comm_owns), which alone computes
