@@ -92,9 +92,9 @@ static const rp_option_spec hier_options[] = {
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
      "1e-3"},
     {"importance", "camera|surfaces|none|auto",
-     "weigh the refinement by importance (Smits, Arvo & Salesin 1992): camera: what the image "
-     "sees, surfaces: every surface's average alike, none: uniform; auto: camera for an image "
-     "alone, surfaces for surface averages alone, none when both are wanted",
+     "weigh the refinement by importance (Smits, Arvo & Salesin 1992): camera: what the image sees, "
+     "surfaces: uniform over the faces that reflect, none: off (the BF oracle alone); auto: camera for "
+     "an image alone, surfaces for surface averages alone, none when both are wanted",
      "auto"},
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
@@ -405,6 +405,9 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         if ((st = hier_importance_init(s, err)) != RP_OK)
             return st;
         s->imp_nn = s->nnodes;
+        hier_log(s, "hierarchical: importance %s%s",
+                 s->importance == HIER_IMP_CAMERA ? "camera (one ray per pixel centre)" : "surfaces (uniform)",
+                 im && strcmp(im, "auto") != 0 ? "" : " (--importance auto)");
     }
     s->residual = -1;
     s->bytes = hier_bytes(s);
