@@ -32,8 +32,10 @@
  *
  * Direct importance r:
  *   camera    one ray through the centre of every pixel (the image's own
- *             camera, camera.h); each front hit on a face adds 1 / pixels
- *             to the leaf it lands in, divided by the leaf's area;
+ *             camera, camera.h); each front hit on a face adds 1 / pixels,
+ *             spread as a density over the smallest element around it
+ *             that holds enough hits to measure one (a cut of the
+ *             quadtree, hier_importance_direct);
  *   surfaces  the radiosity of every face, by area: r = 1 on every face
  *             that reflects (R_i = A_i, each element's area share up to
  *             a constant).  (r = 1 / A_s, every surface's average alike,
@@ -70,6 +72,9 @@
 
 #include "../../geometry/camera.h"
 #include "hier_internal.h"
+
+/* Camera hits a node of the density cut holds at least (hier_importance_direct). */
+#define HIER_IMP_HITS 16
 
 rp_status hier_importance_init(hier_state *s, rp_error *err)
 {
@@ -129,14 +134,44 @@ rp_status hier_importance_direct(hier_state *s, rp_error *err)
     double *r = s->Y0;
     const size_t nn = s->nnodes;
     if (s->importance == HIER_IMP_CAMERA) {
-        memset(r, 0, nn * sizeof *r);
-        double wpix = 1.0 / s->imp_pixels;
+        /* Hits per node (a leaf's count in it and all its ancestors). */
+        uint32_t *cnt = calloc(nn ? nn : 1, sizeof *cnt);
+        unsigned char *cut = malloc(nn ? nn : 1);
+        if (!cnt || !cut) {
+            free(cnt);
+            free(cut);
+            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for importance");
+        }
         for (size_t k = 0; k < s->nimp_hits; k++) {
             double w[4];
-            r[hier_locate(s, s->imp_hits[k].face, s->imp_hits[k].p, w)] += wpix;
+            for (uint32_t i = hier_locate(s, s->imp_hits[k].face, s->imp_hits[k].p, w); i != RP_NONE;
+                 i = s->nodes[i].parent)
+                cnt[i]++;
         }
-        for (size_t i = 0; i < nn; i++)
-            r[i] = s->nodes[i].child == RP_NONE && s->nodes[i].area > 0 ? r[i] / s->nodes[i].area : 0;
+        /* Hit densities on a cut of each quadtree: a node is split only
+         * while each of its children holds HIER_IMP_HITS hits, and every
+         * leaf below a node of the cut gets its density, hits / (pixels x
+         * area).  One hit per leaf would make the direct importance of
+         * leaves smaller than a pixel's footprint 0 or a spike (the
+         * oracle would refine them at random); on a cut the densities
+         * still add up, area-weighted, to the share of the image each
+         * face covers.  Parents come before children in node order. */
+        const double wpix = 1.0 / s->imp_pixels;
+        for (size_t i = 0; i < nn; i++) {
+            const hier_node *nd = &s->nodes[i];
+            if (nd->parent != RP_NONE && cut[nd->parent]) {
+                r[i] = r[nd->parent];
+                cut[i] = 1;
+                continue;
+            }
+            int split = nd->child != RP_NONE;
+            for (uint32_t c = 0; split && c < 4; c++)
+                split = cnt[nd->child + c] >= HIER_IMP_HITS;
+            cut[i] = (unsigned char)!split;
+            r[i] = !split && nd->area > 0 ? cnt[i] * wpix / nd->area : 0;
+        }
+        free(cnt);
+        free(cut);
     } else {
         /* Uniform on every face that reflects (the radiosity of one that
          * does not is its emission, with no error to weigh). */
