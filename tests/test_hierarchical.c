@@ -1192,7 +1192,8 @@ Test(hier, cluster_elephant_against_pathtrace, .init = hsetup, .timeout = 600)
  * release before it (commit e986708) printed them with `radpt probe
  * --surface-averages --json` (10 significant digits, so 2e-9 relative),
  * and bit for bit what auto gives when both an image and surface averages
- * are wanted (auto is none then). */
+ * are wanted (auto is none then, and for surface averages alone; camera
+ * for an image alone). */
 Test(hier, importance_none_is_unchanged, .init = hsetup, .timeout = 120)
 {
     static const double want[][3] = {
@@ -1234,6 +1235,17 @@ Test(hier, importance_none_is_unchanged, .init = hsetup, .timeout = 120)
                                s, b, h[0][s * nb + b], want[s][b]);
     cr_assert_eq(n[0], n[1]);
     cr_assert_eq(memcmp(B[0], B[1], n[0] * nb * sizeof *B[0]), 0, "none and auto (image and surfaces) differ");
+    /* auto: camera for an image alone, none for surface averages alone */
+    const unsigned wants[2] = {RP_WANT_IMAGE, RP_WANT_SURFACES};
+    const int imps[2] = {HIER_IMP_CAMERA, HIER_IMP_NONE};
+    for (int k = 0; k < 2; k++) {
+        hrun r;
+        rp_error err = {""};
+        cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, wants[k], 0, NULL, &err), RP_OK, "%s",
+                     err.message);
+        cr_assert_eq((int)((hier_state *)r.state)->importance, imps[k]);
+        hrun_end(&r);
+    }
     for (int k = 0; k < 2; k++) {
         free(h[k]);
         free(B[k]);

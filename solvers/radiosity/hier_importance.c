@@ -9,14 +9,14 @@
  *
  *     Y = R + K^T Y,   Y_i = R_i + sum_j rho_j F_ji Y_j
  *
- * (Smits et al. 1992, sec. 2, the importance equation), and then
+ * (the importance equation of Smits et al. 1992: the adjoint of B = E + K B;
+ * section numbers are not cited here, the paper was not at hand), and then
  * <R, B> = <Y, E>: Y_i is what a unit of radiosity on i adds to the
- * answer, directly (R_i) or after bouncing off the elements j its light
- * reaches (a fraction F_ji of the light leaving j... by reciprocity the
- * light leaving i lands on j with F_ij = A_j F_ji / A_i, is reflected with
- * rho_j and counts Y_j).  So importance travels along the links against
- * the light, and it is the receiver of the light, j, whose reflectance
- * multiplies it.
+ * answer, directly (R_i) or through every element j that gathers from i,
+ * whose radiosity grows by rho_j F_ji (the power A_i F_ij = A_j F_ji that
+ * leaves i towards j, reflected and spread over A_j) and counts Y_j.  So
+ * importance travels along the links against the light, and it is the
+ * reflectance of the light's receiver j that multiplies it.
  *
  * The hierarchy stores densities (area means) and links carry F_qp from
  * receiver q's point of view, so Y is held as the density y_i = Y_i / A_i.
@@ -47,7 +47,7 @@
  * their emission, exact whatever the links.
  *
  * The oracle (hier_link.c decide, hier_cluster.c cl_decide) weighs a
- * link's transfer by importance, Smits et al. 1992, sec. 4: a link q <- p
+ * link's transfer by importance, as Smits et al. 1992 refine: a link q <- p
  * is refined while
  *
  *     F_err max(rho_q B_p y_q, rho_p y_p B_q) / ybar  >  bf_epsilon

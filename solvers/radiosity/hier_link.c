@@ -482,7 +482,7 @@ static int decide(const hier_state *s, const hier_link *l)
     double e = 0;
     if (s->importance != HIER_IMP_NONE)
         /* Weighted by importance (hier_importance.c; Smits, Arvo &
-         * Salesin 1992, sec. 4), in the same units. */
+         * Salesin 1992), in the same units. */
         e = hier_importance_error(s, rho, s->B + (size_t)l->recv * nb, s->Y + (size_t)l->recv * nb,
                                   s->faces[p->face].rho, Bp, s->Y + (size_t)l->src * nb);
     else
