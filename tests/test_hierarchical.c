@@ -26,7 +26,8 @@
  *   - Gouraud images have no cracks: on the Cornell box (whose blocks force
  *     T-vertices) the interpolated radiosity on both sides of every leaf
  *     edge inside a face agrees;
- *   - the same answers, bit for bit, with one thread and with two;
+ *   - the same answers, bit for bit, with one thread and with two (with
+ *     importance too: camera through auto, surfaces with clustering);
  *   - a refinement pass that refines nothing leaves the links untouched;
  *   - clustering (Smits, Arvo & Greenberg 1994): the furnace cut into 3072
  *     triangles, every leaf within 2e-6 of L = 2 (row-sum normalisation
@@ -862,28 +863,33 @@ Test(hier, cluster_same_answer_for_any_thread_count, .init = hsetup, .timeout = 
     char *text = grid_box(6, 1, "bands grey\nmaterial lamp reflect 0.5 emit 1\nmaterial wall reflect 0.5\n", mat);
     rp_scene *scene = rp_test_parse(text);
     free(text);
-    double *B[2];
-    size_t n[2], links[2], cl[2];
-    for (int t = 0; t < 2; t++) {
-        hrun r;
-        const char *kv[] = {"cluster", "on", "bf-epsilon", "0.02", NULL};
-        solve_hier(&r, scene, RP_WANT_SURFACES, t + 1, kv);
-        rp_hier_stats st;
-        rp_hierarchical_stats(r.state, &st);
-        links[t] = st.links;
-        cl[t] = st.cluster_links;
-        n[t] = rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0);
-        B[t] = malloc(n[t] * sizeof *B[t]);
-        rp_hierarchical_leaves(r.state, NULL, NULL, B[t], n[t]);
-        hrun_end(&r);
+    /* without importance and with it (the importance sweeps and the
+     * cluster oracle's importance) */
+    static const char *const imp[2] = {"none", "surfaces"};
+    for (int m = 0; m < 2; m++) {
+        double *B[2];
+        size_t n[2], links[2], cl[2];
+        for (int t = 0; t < 2; t++) {
+            hrun r;
+            const char *kv[] = {"cluster", "on", "bf-epsilon", "0.02", "importance", imp[m], NULL};
+            solve_hier(&r, scene, RP_WANT_SURFACES, t + 1, kv);
+            rp_hier_stats st;
+            rp_hierarchical_stats(r.state, &st);
+            links[t] = st.links;
+            cl[t] = st.cluster_links;
+            n[t] = rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0);
+            B[t] = malloc(n[t] * sizeof *B[t]);
+            rp_hierarchical_leaves(r.state, NULL, NULL, B[t], n[t]);
+            hrun_end(&r);
+        }
+        cr_assert_gt(cl[0], 0);
+        cr_assert_eq(links[0], links[1]);
+        cr_assert_eq(cl[0], cl[1]);
+        cr_assert_eq(n[0], n[1]);
+        cr_assert_eq(memcmp(B[0], B[1], n[0] * sizeof *B[0]), 0, "leaf radiosities differ (importance %s)", imp[m]);
+        for (int t = 0; t < 2; t++)
+            free(B[t]);
     }
-    cr_assert_gt(cl[0], 0);
-    cr_assert_eq(links[0], links[1]);
-    cr_assert_eq(cl[0], cl[1]);
-    cr_assert_eq(n[0], n[1]);
-    cr_assert_eq(memcmp(B[0], B[1], n[0] * sizeof *B[0]), 0, "leaf radiosities differ");
-    for (int t = 0; t < 2; t++)
-        free(B[t]);
     rp_scene_destroy(scene);
 }
 
