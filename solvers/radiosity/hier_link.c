@@ -480,9 +480,12 @@ static int decide(const hier_state *s, const hier_link *l)
     const double *rho = s->faces[q->face].rho;
     const double *Bp = s->B + (size_t)l->src * nb;
     double e = 0;
-    if (s->importance != HIER_IMP_NONE)
+    if (s->importance != HIER_IMP_NONE && !(l->flags & HIER_LINK_INVISIBLE))
         /* Weighted by importance (hier_importance.c; Smits, Arvo &
-         * Salesin 1992), in the same units. */
+         * Salesin 1992), in the same units.  Not a link whose rays were
+         * all blocked: the oracle's "keep" drops it for good, and the
+         * light of a penumbra its rays missed with it, so it goes only
+         * as deep as without importance. */
         e = hier_importance_error(s, rho, s->B + (size_t)l->recv * nb, s->Y + (size_t)l->recv * nb,
                                   s->faces[p->face].rho, Bp, s->Y + (size_t)l->src * nb);
     else
