@@ -27,8 +27,8 @@
  * the radiosity equation with the reflectance moved from the receiver q to
  * the source p.  So importance is gathered over the very links light is
  * (same form factors, same push-pull, same row-sum normalisation in an
- * enclosure: hierarchical.c, importance_sweep), one Jacobi sweep after
- * every radiosity sweep, alternating as in the paper.
+ * enclosure: hierarchical.c, importance_sweep), one Jacobi sweep before
+ * every radiosity sweep, the two solved alternately as in the paper.
  *
  * Direct importance r:
  *   camera    one ray through the centre of every pixel (the image's own
@@ -53,15 +53,17 @@
  *     F_err max(rho_q B_p y_q, rho_p y_p B_q) / ybar  >  bf_epsilon
  *
  * (worst band).  The first term is the error the link puts into the answer
- * through the light it carries, the second (the paper's symmetric term)
- * the error through the importance it carries, weighed by the radiosity it
- * then meets.  ybar, the importance-weighted mean of y over the leaves of
+ * through the light it carries, the second (the symmetric term: the same
+ * links carry importance) the error through the importance it carries,
+ * weighed by the radiosity it then meets.  ybar, the importance-weighted mean of y over the leaves of
  * the faces that reflect (sum A y^2 / sum A y, hier_importance_finish), keeps the
  * units and the meaning of --bf-epsilon: with a uniform y the first term
  * is the BF oracle's rho_q B_p F_err, and where y is typical of what is
- * seen, close to it.  (The paper sums the two
- * terms; the larger of the two keeps a link from a pure emitter, rho_p =
- * 0, judged exactly as without importance at uniform y.)
+ * seen, close to it.  (The larger of the two terms rather than their sum:
+ * a link from a pure emitter, rho_p = 0, is then judged exactly as
+ * without importance at uniform y.)  A face-level link whose visibility
+ * rays were all blocked is judged without importance (hier_link.c): the
+ * oracle's "keep" drops it for good.
  *
  * Determinism: the camera rays are one per pixel, written to their own
  * slots; every sum here runs in node or hit order. */
