@@ -123,6 +123,11 @@ static const double *item_B(const hier_state *s, uint32_t it)
     return is_node(it) ? s->B + (size_t)it * s->nb : s->cl_B + (size_t)(it & ~HIER_CL_BIT) * s->nb;
 }
 
+static const double *item_Y(const hier_state *s, uint32_t it)
+{
+    return is_node(it) ? s->Y + (size_t)it * s->nb : s->cl_Y + (size_t)(it & ~HIER_CL_BIT) * s->nb;
+}
+
 static void item_cone(const hier_state *s, uint32_t it, rp_vec3 *axis, double *cs, double *sn)
 {
     if (is_node(it)) {
@@ -430,8 +435,13 @@ static int cl_decide(const hier_state *s, const hier_clink *l)
     if (j == 1) {
         const double *rho = item_rho(s, l->recv), *B = item_B(s, l->src);
         double e = 0;
-        for (size_t b = 0; b < s->nb; b++)
-            e = hier_max(e, rho[b] * B[b]);
+        if (s->importance != HIER_IMP_NONE)
+            /* weighted by importance (hier_importance.c) */
+            e = hier_importance_error(s, rho, item_B(s, l->recv), item_Y(s, l->recv), item_rho(s, l->src), B,
+                                      item_Y(s, l->src));
+        else
+            for (size_t b = 0; b < s->nb; b++)
+                e = hier_max(e, rho[b] * B[b]);
         if (!(e * Fb * hier_min(1.0, item_area(s, l->recv) / s->cl_area) > s->bf_eps))
             return 0;
     }
@@ -1210,5 +1220,26 @@ void hier_cluster_gather_nodes(hier_state *s, double *Bg)
             double *g = Bg + (size_t)e->recv * nb;
             for (size_t b = 0; b < nb; b++)
                 g[b] += rho[b] * e->F * Bs[b];
+        }
+}
+
+void hier_cluster_gather_importance(hier_state *s, double *Yg)
+{
+    if (!s->clustering)
+        return;
+    const size_t nb = s->nb;
+    const hier_centry *pools[2] = {s->cl_nent, s->cl_cent};
+    const size_t counts[2] = {s->ncl_nent, s->ncl_cent};
+    for (int p = 0; p < 2; p++)
+        for (size_t k = 0; k < counts[p]; k++) {
+            const hier_centry *e = &pools[p][k];
+            if (e->F == 0)
+                continue;
+            /* y_q += F rho_p y_p: the reflectance is the source's
+             * (hier_importance.c) */
+            const double *Ys = s->Y + (size_t)e->src * nb, *rho = s->faces[s->nodes[e->src].face].rho;
+            double *g = Yg + (size_t)e->recv * nb;
+            for (size_t b = 0; b < nb; b++)
+                g[b] += rho[b] * e->F * Ys[b];
         }
 }

@@ -137,6 +137,20 @@ typedef enum hier_recon {
     HIER_RECON_GATHER
 } hier_recon;
 
+/* --importance (Smits, Arvo & Salesin 1992): what the oracle weighs links
+ * by, see hier_importance.c. */
+typedef enum hier_importance {
+    HIER_IMP_NONE,
+    HIER_IMP_CAMERA,
+    HIER_IMP_SURFACES
+} hier_importance;
+
+/* A camera ray's first hit on the front of a face (--importance camera). */
+typedef struct hier_imp_hit {
+    rp_vec3 p;
+    uint32_t face;
+} hier_imp_hit;
+
 typedef struct hier_state {
     const rp_scene *scene;
     /* --simplify (reconstruct.h): scene is view.sol's, a coarser copy of
@@ -217,6 +231,21 @@ typedef struct hier_state {
     unsigned cluster_rays;
     unsigned cluster_face_rays; /* samples per face of a receiving cluster */
     double cl_area_rel, cl_area; /* power-error area scale (relative, absolute) */
+
+    /* Importance (hier_importance.c); all NULL / 0 with --importance none. */
+    hier_importance importance;
+    double *Y;           /* nnodes x nb: importance density (area mean over the
+                            node, like B), grown with the nodes */
+    double *Y0;          /* nnodes: direct importance density (leaves) */
+    size_t cap_Y0;
+    double *cl_Y;        /* ncl x nb: area-mean importance of each cluster */
+    hier_imp_hit *imp_hits; /* camera: the pixel-centre rays' hits */
+    size_t nimp_hits;
+    double imp_pixels;   /* camera: pixels in the image (hits weigh 1 / it) */
+    double y_scale;      /* 1 / the importance-weighted mean importance of the
+                            reflecting leaves (worst band): uniform importance weighs 1 */
+    unsigned long imp_sweeps;
+    size_t imp_nn;       /* nnodes when Y0 was last filled */
 
     /* Parameters. */
     double bf_rel, min_area_rel;   /* as given: relative */
@@ -303,6 +332,8 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err);
 /* Adds rho F B_src of every cluster-link entry to the receiving node's
  * gathered radiosity Bg (hier_sweep, between its gather and its push). */
 void hier_cluster_gather_nodes(hier_state *s, double *Bg);
+/* The same for importance: F rho_src Y_src into Yg (hier_importance.c). */
+void hier_cluster_gather_importance(hier_state *s, double *Yg);
 void hier_cluster_free(hier_state *s);
 /* The oracle's bound on the form factor from any point of item recv to
  * item src (items: quadtree nodes, or clusters with HIER_CL_BIT):
@@ -310,6 +341,22 @@ void hier_cluster_free(hier_state *s);
  * touch (always split), -1 when nothing can pass between them.  For the
  * tests. */
 double hier_cluster_bound(const hier_state *s, uint32_t recv, uint32_t src);
+
+/* ---- hier_importance.c ---- */
+
+/* Sets up s->importance's direct term (camera: casts one ray through each
+ * pixel centre) and the roots' importance Y = Y0. */
+rp_status hier_importance_init(hier_state *s, rp_error *err);
+/* Fills s->Y0 for the current leaves (density: importance per unit area). */
+rp_status hier_importance_direct(hier_state *s, rp_error *err);
+/* After an importance sweep: the clusters' importance and y_scale. */
+void hier_importance_finish(hier_state *s);
+/* The oracle's weight of the transfer q <- p through F (max over bands of
+ * F (rho_q B_p Y_q + ...) y_scale), for items (nodes or clusters):
+ * hier_link.c and hier_cluster.c. */
+double hier_importance_error(const hier_state *s, const double *rho_q, const double *Bq, const double *Yq,
+                             const double *rho_p, const double *Bp, const double *Yp);
+void hier_importance_free(hier_state *s);
 
 /* ---- hier_image.c ---- */
 

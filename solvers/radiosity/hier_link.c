@@ -480,8 +480,17 @@ static int decide(const hier_state *s, const hier_link *l)
     const double *rho = s->faces[q->face].rho;
     const double *Bp = s->B + (size_t)l->src * nb;
     double e = 0;
-    for (size_t b = 0; b < nb; b++)
-        e = hier_max(e, rho[b] * Bp[b]);
+    if (s->importance != HIER_IMP_NONE && !(l->flags & HIER_LINK_INVISIBLE))
+        /* Weighted by importance (hier_importance.c; Smits, Arvo &
+         * Salesin 1992), in the same units.  Not a link whose rays were
+         * all blocked: the oracle's "keep" drops it for good, and the
+         * light of a penumbra its rays missed with it, so it goes only
+         * as deep as without importance. */
+        e = hier_importance_error(s, rho, s->B + (size_t)l->recv * nb, s->Y + (size_t)l->recv * nb,
+                                  s->faces[p->face].rho, Bp, s->Y + (size_t)l->src * nb);
+    else
+        for (size_t b = 0; b < nb; b++)
+            e = hier_max(e, rho[b] * Bp[b]);
     /* With clustering, elements smaller than cl_area are judged by the
      * error in the power they receive instead of their radiosity
      * (Smits, Arvo & Greenberg 1994, sec. 4): e x F x A_q / cl_area. */

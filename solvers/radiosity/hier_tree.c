@@ -63,6 +63,12 @@ static rp_status grow_nodes(hier_state *s, size_t need, rp_error *err)
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
         *arrs[k] = a;
     }
+    if (s->Y) {
+        double *y = realloc(s->Y, cap * s->nb * sizeof *y);
+        if (!y)
+            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
+        s->Y = y;
+    }
     double *w = realloc(s->W, cap * sizeof *w);
     if (!w)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
@@ -175,6 +181,9 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err)
             s->Bg[ci * nb + b] = 0;
             s->Bd[ci * nb + b] = 0;
         }
+        if (s->Y)
+            for (size_t b = 0; b < nb; b++)
+                s->Y[ci * nb + b] = s->Y[(size_t)i * nb + b];
     }
     p->child = first;
     s->nnodes += 4;
@@ -353,7 +362,10 @@ uint32_t hier_locate(const hier_state *s, uint32_t f, rp_vec3 p, double w[4])
 
 size_t hier_bytes(const hier_state *s)
 {
-    size_t b = s->cap_nodes * (sizeof(hier_node) + (3 * s->nb + 1) * sizeof(double));
+    size_t b = s->cap_nodes * (sizeof(hier_node) + ((s->Y ? 4 : 3) * s->nb + 1) * sizeof(double));
+    if (s->Y)
+        b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit) +
+             (s->clustering ? s->ncl * s->nb * sizeof(double) : 0);
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
     if (s->clustering)
