@@ -486,7 +486,8 @@ rp_status rp_exp_modelsize(const rp_experiment_params *p, rp_error *err)
             fprintf(o.f, "%s ", ms_scenes[si].id);
             rp_exp_dnum(o.f, runs[si][m].v[0]);
             fputc(' ', o.f);
-            rp_exp_dnum(o.f, runs[si][m].v[1]);
+            /* a method that reports no memory of its own (the path tracer) has no point on the memory chart */
+            rp_exp_dnum(o.f, runs[si][m].v[1] > 0 ? runs[si][m].v[1] : NAN);
             fputc(' ', o.f);
             rp_exp_dnum(o.f, runs[si][m].ran ? 100 * runs[si][m].max_rel : NAN);
             fputc('\n', o.f);
@@ -564,7 +565,8 @@ rp_status rp_exp_modelsize(const rp_experiment_params *p, rp_error *err)
             "surfaces holding %.0f%% of the area or more that do not only emit, against the path-traced "
             "reference's surface averages (independent samples; their standard error is given per scene). Time "
             "is solver time (set-up and steps, simplification included); memory is what the method reports "
-            "holding (for hierarchical radiosity: nodes, radiosities and links; not the ray-casting structures).\n\n",
+            "holding (for hierarchical radiosity: nodes, radiosities and links; not the ray-casting structures; the path "
+            "tracer reports none of its own beyond those, so it shows - and has no point on the memory chart).\n\n",
             samples, p->quick ? " at the fast setting `--bf-epsilon 0.05 --min-area 2e-4` (quick form)" : " (defaults)",
             100 * MS_AREA_SHARE);
     if (*note)
@@ -586,7 +588,7 @@ rp_status rp_exp_modelsize(const rp_experiment_params *p, rp_error *err)
             fprintf(f, "| %s | ", ms_methods[m].label);
             fnum(f, r->v[0], "%.2f");
             fprintf(f, " | ");
-            fnum(f, r->v[1], "%.1f");
+            fnum(f, r->v[1] > 0 ? r->v[1] : NAN, "%.1f");
             fprintf(f, " | ");
             fnum(f, r->v[2], "%.0f");
             fprintf(f, " | ");
