@@ -1204,7 +1204,10 @@ done:
 
 /* ---- gathering ---- */
 
-void hier_cluster_gather_nodes(hier_state *s, double *Bg)
+/* out[recv] += rho F X[src] over every entry of the cluster links, rho the
+ * receiver's reflectance (radiosity) or, for the adjoint, the source's
+ * (importance: y_q += F rho_p y_p, hier_importance.c). */
+static void gather_entries(const hier_state *s, const double *X, int rho_of_src, double *out)
 {
     if (!s->clustering)
         return;
@@ -1216,30 +1219,14 @@ void hier_cluster_gather_nodes(hier_state *s, double *Bg)
             const hier_centry *e = &pools[p][k];
             if (e->F == 0)
                 continue;
-            const double *Bs = s->B + (size_t)e->src * nb, *rho = s->faces[s->nodes[e->recv].face].rho;
-            double *g = Bg + (size_t)e->recv * nb;
+            const double *Xs = X + (size_t)e->src * nb;
+            const double *rho = s->faces[s->nodes[rho_of_src ? e->src : e->recv].face].rho;
+            double *g = out + (size_t)e->recv * nb;
             for (size_t b = 0; b < nb; b++)
-                g[b] += rho[b] * e->F * Bs[b];
+                g[b] += rho[b] * e->F * Xs[b];
         }
 }
 
-void hier_cluster_gather_importance(hier_state *s, double *Yg)
-{
-    if (!s->clustering)
-        return;
-    const size_t nb = s->nb;
-    const hier_centry *pools[2] = {s->cl_nent, s->cl_cent};
-    const size_t counts[2] = {s->ncl_nent, s->ncl_cent};
-    for (int p = 0; p < 2; p++)
-        for (size_t k = 0; k < counts[p]; k++) {
-            const hier_centry *e = &pools[p][k];
-            if (e->F == 0)
-                continue;
-            /* y_q += F rho_p y_p: the reflectance is the source's
-             * (hier_importance.c) */
-            const double *Ys = s->Y + (size_t)e->src * nb, *rho = s->faces[s->nodes[e->src].face].rho;
-            double *g = Yg + (size_t)e->recv * nb;
-            for (size_t b = 0; b < nb; b++)
-                g[b] += rho[b] * e->F * Ys[b];
-        }
-}
+void hier_cluster_gather_nodes(hier_state *s, double *Bg) { gather_entries(s, s->B, 0, Bg); }
+
+void hier_cluster_gather_importance(hier_state *s, double *Yg) { gather_entries(s, s->Y, 1, Yg); }

@@ -487,6 +487,27 @@ static void source_radiosity(const hier_state *s, hier_link *l, double *out) { s
 
 /* One Jacobi sweep: gather over every node's links, then push-pull.
  * Returns the relative energy change. */
+/* Push-pull's pull to parent node nd: the mean of its children's values X
+ * (nb each) weighted by W (the area each child's reached leaves hold; by
+ * area when none is reached) into Xi; returns the parent's weight. */
+static double pull_children(const hier_state *s, const hier_node *nd, const double *W, const double *X, double *Xi)
+{
+    const size_t nb = s->nb;
+    double a = 0, w = 0;
+    for (uint32_t c = nd->child; c < nd->child + 4; c++) {
+        a += s->nodes[c].area;
+        w += W[c];
+    }
+    for (size_t b = 0; b < nb; b++)
+        Xi[b] = 0;
+    for (uint32_t c = nd->child; c < nd->child + 4; c++) {
+        double wc = w > 0 ? W[c] / w : s->nodes[c].area / a;
+        for (size_t b = 0; b < nb; b++)
+            Xi[b] += wc * X[(size_t)c * nb + b];
+    }
+    return w;
+}
+
 static double hier_sweep(hier_state *s)
 {
     const size_t nb = s->nb, nn = s->nnodes;
@@ -558,19 +579,7 @@ static double hier_sweep(hier_state *s)
             W[i] = (W[i] > 0 || emits) ? nd->area : 0;
             continue;
         }
-        double a = 0, w = 0;
-        for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-            a += s->nodes[c].area;
-            w += W[c];
-        }
-        for (size_t b = 0; b < nb; b++)
-            Bi[b] = 0;
-        for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-            double wc = w > 0 ? W[c] / w : s->nodes[c].area / a;
-            for (size_t b = 0; b < nb; b++)
-                Bi[b] += wc * B[(size_t)c * nb + b];
-        }
-        W[i] = w;
+        W[i] = pull_children(s, nd, W, B, Bi);
     }
     double r = 0;
     for (size_t b = 0; b < nb; b++)
@@ -635,19 +644,7 @@ static void importance_sweep(hier_state *s)
             W[i] = W[i] > 0 ? nd->area : 0;
             continue;
         }
-        double a = 0, w = 0;
-        for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-            a += s->nodes[c].area;
-            w += W[c];
-        }
-        for (size_t b = 0; b < nb; b++)
-            Yi[b] = 0;
-        for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-            double wc = w > 0 ? W[c] / w : s->nodes[c].area / a;
-            for (size_t b = 0; b < nb; b++)
-                Yi[b] += wc * Y[(size_t)c * nb + b];
-        }
-        W[i] = w;
+        W[i] = pull_children(s, nd, W, Y, Yi);
     }
     s->imp_sweeps++;
 }
