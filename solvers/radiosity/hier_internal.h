@@ -53,8 +53,10 @@ enum {
     HIER_LINK_PARTIAL = 1u << 0,  /* some visibility rays blocked */
     HIER_LINK_STRADDLE = 1u << 1, /* one element crosses the other's plane */
     HIER_LINK_TESTED = 1u << 2,   /* visibility was sampled by rays */
-    HIER_LINK_INVISIBLE = 1u << 3 /* every ray blocked: kept only until the
-                                     oracle decides not to refine it */
+    HIER_LINK_INVISIBLE = 1u << 3 /* every deciding ray blocked: kept only
+                                     until the oracle decides not to refine
+                                     it, unless the value's rays found it
+                                     visible (hier_link_eval) */
 };
 
 /* A one-way link: the receiver gathers rho F B_src through it. */

@@ -49,6 +49,9 @@
 #include "ff_internal.h"
 #include "hier_internal.h"
 
+/* Mixed into the seed for a link's second set of visibility rays. */
+#define HIER_VALUE_KEY UINT64_C(0x6a09e667f3bcc909)
+
 /* ---- shaft culling ---- */
 
 static int box_overlap(rp_vec3 alo, rp_vec3 ahi, rp_vec3 blo, rp_vec3 bhi, double eps)
@@ -181,6 +184,85 @@ double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_
     return hier_point_polygon(x, n, p->v, p->nverts);
 }
 
+/* The visibility rays of a link: m x m jittered strata on q paired with
+ * a random permutation of m x m strata on p.  When one crosses the
+ * other's plane only the part of each in front of the other can exchange
+ * light: the strata are laid on those two clipped polygons, so every pair
+ * faces the other way round and the rays measure the visibility of the
+ * part that carries the energy.  (Drawn over the whole elements, all
+ * pairs of a sliver pair could face away; with no ray cast the link used
+ * to be taken as fully visible, which let the room's walls shine into a
+ * sealed shell through its inside surface.) */
+typedef struct {
+    const hier_node *q, *p;
+    const hier_face *fq, *fp;
+    int straddle, nq, np;
+    rp_vec3 qc[8], pc[8];
+    double qcum[8], pcum[8];
+} link_rays;
+
+/* 0 when no part of either element faces the other. */
+static int link_rays_prepare(link_rays *r, const hier_node *q, const hier_node *p, const hier_face *fq,
+                             const hier_face *fp, int straddle)
+{
+    r->q = q;
+    r->p = p;
+    r->fq = fq;
+    r->fp = fp;
+    r->straddle = straddle;
+    r->nq = r->np = 0;
+    if (!straddle)
+        return 1;
+    r->nq = (int)rp_ff_clip(q->v, q->nverts, fp->n, fp->d, r->qc);
+    r->np = (int)rp_ff_clip(p->v, p->nverts, fq->n, fq->d, r->pc);
+    return hier_polygon_prepare(r->qc, r->nq, r->qcum) && hier_polygon_prepare(r->pc, r->np, r->pcum);
+}
+
+/* Casts one set of rays drawn with key; *open of *valid pairs that can
+ * carry light were unblocked.  Returns the visible fraction, each pair
+ * weighted by its kernel cos cos / r^2 (where the visible part of p is the
+ * nearer one, or the one seen more squarely, a plain fraction of open rays
+ * would understate the energy it passes); 0 when no pair can carry light. */
+static double link_rays_cast(const hier_state *s, const link_rays *r, uint64_t key, unsigned *open,
+                             unsigned *valid, double *rays)
+{
+    unsigned m = (unsigned)floor(sqrt((double)s->vis_rays) + 0.5), N = m * m;
+    uint32_t perm[64];
+    hier_shuffle(perm, N, key, 4 * (uint64_t)N);
+    double wsum = 0, wopen = 0, w[64];
+    rp_vec3 a[64], b[64];
+    unsigned char blocked[64];
+    *valid = *open = 0;
+    for (unsigned k = 0; k < N; k++) {
+        double u1 = ((k % m) + hier_u01(key, 4 * (uint64_t)k)) / m;
+        double u2 = ((k / m) + hier_u01(key, 4 * (uint64_t)k + 1)) / m;
+        double w1 = ((perm[k] % m) + hier_u01(key, 4 * (uint64_t)k + 2)) / m;
+        double w2 = ((perm[k] / m) + hier_u01(key, 4 * (uint64_t)k + 3)) / m;
+        rp_vec3 x = r->straddle ? hier_polygon_point(r->qc, r->nq, r->qcum, u1, u2) : hier_node_point(r->q, u1, u2);
+        rp_vec3 y = r->straddle ? hier_polygon_point(r->pc, r->np, r->pcum, w1, w2) : hier_node_point(r->p, w1, w2);
+        rp_vec3 xy = rp_v3_sub(y, x);
+        if (r->straddle && (rp_v3_dot(xy, r->fq->n) <= 0 || rp_v3_dot(xy, r->fp->n) >= 0))
+            continue;
+        double r2 = rp_v3_dot(xy, xy);
+        w[*valid] = hier_max(rp_v3_dot(xy, r->fq->n), 0) * hier_max(-rp_v3_dot(xy, r->fp->n), 0) / (r2 * r2);
+        a[*valid] = x;
+        b[*valid] = y;
+        (*valid)++;
+    }
+    /* The segments leave one small element for another: one coherent
+     * stream. */
+    rp_ray_occluded_n(s->rc, *valid, a, r->fq->n, b, r->fp->n, blocked);
+    *rays += *valid;
+    for (unsigned k = 0; k < *valid; k++) {
+        wsum += w[k];
+        if (!blocked[k]) {
+            (*open)++;
+            wopen += w[k];
+        }
+    }
+    return *valid ? (wsum > 0 ? wopen / wsum : (double)*open / *valid) : 0.0;
+}
+
 /* Evaluates link q <- p into *out.  Returns 0 if there is no link (the two
  * do not face each other, or no part of q sees p), 1 for a link, 2 for a
  * link every visibility ray found blocked (not stored). */
@@ -245,6 +327,15 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
             flo = hier_min(flo, fk[k]);
         }
         Fvar = hier_max(Fmax - F, F - flo);
+        if (emitter) {
+            /* The four quarters of a receiver centred under a source agree
+             * with each other and not with the centre (a floor under its
+             * lamp: 0.009 at the quarters, 0.08 at the centre), so the
+             * variation also counts the centroid; without it such a link
+             * was never refined and kept the midpoint rule's 4 points. */
+            double fc = hier_point_to_node(s, q->c, fq->n, p, 0);
+            Fvar = hier_max(Fvar, fabs(fc - F));
+        }
         if (straddle)
             /* All four centres may lie behind p while a corner of q sees
              * it (the floor beside a box): the corners, pulled 1% towards
@@ -260,71 +351,29 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
     double vis = 1;
     uint32_t flags = straddle ? HIER_LINK_STRADDLE : 0;
     if (shaft_blocked(s, q, p)) {
-        /* m x m jittered strata on q paired with a random permutation of
-         * m x m strata on p.  When one crosses the other's plane only the
-         * part of each in front of the other can exchange light: the
-         * strata are laid on those two clipped polygons, so every pair
-         * faces the other way round and the rays measure the visibility
-         * of the part that carries the energy.  (Drawn over the whole
-         * elements, all pairs of a sliver pair could face away; with no
-         * ray cast the link used to be taken as fully visible, which let
-         * the room's walls shine into a sealed shell through its inside
-         * surface.) */
         flags |= HIER_LINK_TESTED;
-        unsigned m = (unsigned)floor(sqrt((double)s->vis_rays) + 0.5), N = m * m;
-        uint64_t key = hier_key(s->seed, q->id, p->id);
-        uint32_t perm[64];
-        hier_shuffle(perm, N, key, 4 * (uint64_t)N);
-        unsigned valid = 0, open = 0;
-        double wsum = 0, wopen = 0, w[64];
-        rp_vec3 a[64], b[64];
-        unsigned char blocked[64];
-        rp_vec3 qc[8], pc[8];
-        double qcum[8], pcum[8];
-        int nq = 0, np = 0;
-        if (straddle) {
-            nq = (int)rp_ff_clip(q->v, q->nverts, fp->n, fp->d, qc);
-            np = (int)rp_ff_clip(p->v, p->nverts, fq->n, fq->d, pc);
-            if (!hier_polygon_prepare(qc, nq, qcum) || !hier_polygon_prepare(pc, np, pcum))
-                N = 0; /* no part of either faces the other */
-        }
-        for (unsigned k = 0; k < N; k++) {
-            double u1 = ((k % m) + hier_u01(key, 4 * (uint64_t)k)) / m;
-            double u2 = ((k / m) + hier_u01(key, 4 * (uint64_t)k + 1)) / m;
-            double w1 = ((perm[k] % m) + hier_u01(key, 4 * (uint64_t)k + 2)) / m;
-            double w2 = ((perm[k] / m) + hier_u01(key, 4 * (uint64_t)k + 3)) / m;
-            rp_vec3 x = straddle ? hier_polygon_point(qc, nq, qcum, u1, u2) : hier_node_point(q, u1, u2);
-            rp_vec3 y = straddle ? hier_polygon_point(pc, np, pcum, w1, w2) : hier_node_point(p, w1, w2);
-            rp_vec3 xy = rp_v3_sub(y, x);
-            if (straddle && (rp_v3_dot(xy, fq->n) <= 0 || rp_v3_dot(xy, fp->n) >= 0))
-                continue;
-            /* Each pair weighted by its kernel cos cos / r^2: where the
-             * visible part of p is the nearer one (or the one seen more
-             * squarely), a plain fraction of open rays would understate the
-             * energy it passes. */
-            double r2 = rp_v3_dot(xy, xy);
-            w[valid] = hier_max(rp_v3_dot(xy, fq->n), 0) * hier_max(-rp_v3_dot(xy, fp->n), 0) / (r2 * r2);
-            a[valid] = x;
-            b[valid] = y;
-            valid++;
-        }
-        /* The segments leave one small element for another: one coherent
-         * stream. */
-        rp_ray_occluded_n(s->rc, valid, a, fq->n, b, fp->n, blocked);
-        *rays += valid;
-        for (unsigned k = 0; k < valid; k++) {
-            wsum += w[k];
-            if (!blocked[k]) {
-                open++;
-                wopen += w[k];
-            }
-        }
-        /* No pair that can carry light: nothing is known to pass. */
-        vis = valid ? (wsum > 0 ? wopen / wsum : (double)open / valid) : 0.0;
-        if (open < valid)
-            flags |= HIER_LINK_PARTIAL;
-        if (!(vis > 0))
+        link_rays set;
+        if (!link_rays_prepare(&set, q, p, fq, fp, straddle)) {
+            vis = 0; /* no part of either faces the other */
             flags |= HIER_LINK_INVISIBLE;
+        } else {
+            /* Two independent sets of rays (Monte Carlo visibility in
+             * hierarchical radiosity is biased when one set both decides
+             * and measures: a link whose few rays all missed a shadow
+             * keeps visibility 1 while one whose rays found it is refined
+             * and re-measured, so shadows come out too light on average).
+             * The first set decides (partial, invisible: the oracle's
+             * flags), the second, drawn with another key, gives the value
+             * kept: independent of the decision, it is unbiased whatever
+             * the oracle does with the link. */
+            unsigned open = 0, valid = 0;
+            link_rays_cast(s, &set, hier_key(s->seed, q->id, p->id), &open, &valid, rays);
+            if (open < valid)
+                flags |= HIER_LINK_PARTIAL;
+            if (open == 0)
+                flags |= HIER_LINK_INVISIBLE;
+            vis = link_rays_cast(s, &set, hier_key(s->seed ^ HIER_VALUE_KEY, q->id, p->id), &open, &valid, rays);
+        }
     }
     out->recv = qi;
     out->src = pi;
@@ -346,7 +395,7 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
          * factor. */
         out->F_err = (float)(s->invisible_weight * Fmax);
     out->flags = flags;
-    return vis > 0 ? 1 : 2;
+    return (flags & HIER_LINK_INVISIBLE) && !(vis > 0) ? 2 : 1;
 }
 
 /* ---- link storage ---- */
@@ -574,10 +623,13 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
         nsplit += oact[k] != 0;
     }
     for (size_t k = 0; k < nl0; k++)
-        if (!oact[k] && (orig[k].flags & HIER_LINK_INVISIBLE)) {
+        if (!oact[k] && (orig[k].flags & HIER_LINK_INVISIBLE) && !(orig[k].F > 0)) {
             /* An invisible link the oracle would not refine is dropped:
              * 16 blocked rays between two large elements may miss a
-             * penumbra, so it is dropped only once it is this fine. */
+             * penumbra, so it is dropped only once it is this fine, and
+             * only if its second set of rays (the value's) was blocked
+             * too: dropped on the first set alone, the penumbrae those
+             * rays missed would come out too dark on average. */
             oact[k] = 3;
             s->links_invisible++;
             changed = 1;
@@ -681,7 +733,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             for (size_t k = 0; k < nfresh; k++) {
                 if (fact[k])
                     continue;
-                if (fresh[k].flags & HIER_LINK_INVISIBLE)
+                if ((fresh[k].flags & HIER_LINK_INVISIBLE) && !(fresh[k].F > 0))
                     s->links_invisible++;
                 else
                     kept[nkept++] = fresh[k];

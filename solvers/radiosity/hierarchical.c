@@ -69,7 +69,10 @@ static const rp_option_spec hier_options[] = {
      "links whose visibility rays were all blocked are judged by W x their unoccluded form factor "
      "(refined towards a penumbra they may hide, then dropped)",
      "0.25"},
-    {"vis-rays", "N", "visibility rays per link (rounded to a square, at most 64)", "16"},
+    {"vis-rays", "N",
+     "visibility rays per set (rounded to a square, at most 64); a link casts two independent sets, "
+     "one to decide its refinement and one for the visibility it keeps, so that shadows are unbiased",
+     "16"},
     {"tolerance", "EPS",
      "stop when a sweep changes the energy by less than EPS (relative, worst band) and no link "
      "was refined",
