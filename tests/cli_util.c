@@ -128,6 +128,14 @@ int rp_test_tmpdir(char *buf, size_t n, const char *prefix)
     return mkdtemp(buf) ? 0 : -1;
 }
 
+const char *rp_test_ref_cache(void)
+{
+    static const char dir[] = RP_SOURCE_DIR "/build/test-refs";
+    char cmd[sizeof dir + 32];
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s'", dir);
+    return system(cmd) == 0 ? dir : NULL;
+}
+
 int rp_test_rmtree(const char *dir)
 {
     char cmd[1200];

@@ -34,6 +34,16 @@ char *rp_read_file(const char *path);
 
 /* A fresh directory /tmp/PREFIX.XXXXXX in buf; 0, or -1 on failure. */
 int rp_test_tmpdir(char *buf, size_t n, const char *prefix);
+/* The reference cache the experiment tests share, made if missing:
+ * build/test-refs in the source tree, whichever build runs the tests, so
+ * `make asan` after `make test` (CI) reads the path-traced references the
+ * release build computed instead of tracing them again under the
+ * sanitizers (the reference's own code is checked under them by
+ * test_driver.c and test_cli.c).  A reference is keyed by its scene's hash
+ * and its options (bench/run/reference.c), and `make clean` removes it;
+ * NULL if it cannot be made. */
+const char *rp_test_ref_cache(void);
+
 /* rm -rf dir; 0 on success. */
 int rp_test_rmtree(const char *dir);
 

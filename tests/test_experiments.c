@@ -2,8 +2,9 @@
  * bench/experiments/experiments.c) holds in the numbers it wrote, checked
  * here against closed forms and fits the test computes itself.  (stability
  * and realscenes have their own files: test_stability.c and
- * test_realscenes.c.)  The Cornell-box experiments share one reference
- * cache, so they run in one test. */
+ * test_realscenes.c.)  The Cornell-box experiments run in one test, and
+ * every test here reads its path-traced references from the cache shared
+ * by the test builds (rp_test_ref_cache). */
 #include <criterion/criterion.h>
 #include <math.h>
 #include <stdio.h>
@@ -126,10 +127,11 @@ static double loglog_slope(const double *x, const double *y, size_t n)
 
 Test(experiments, cornell_box_quick_forms_hold_their_claims, .timeout = 900)
 {
-    char root[64], cache[96];
+    char root[64], cache[512];
     snprintf(root, sizeof root, "/tmp/rp_exp_XXXXXX");
     cr_assert_not_null(mkdtemp(root));
-    snprintf(cache, sizeof cache, "%s/refs", root);
+    cr_assert_not_null(rp_test_ref_cache());
+    snprintf(cache, sizeof cache, "%s", rp_test_ref_cache());
 
     /* cornell: plain Monte Carlo falls as N^-1/2 against samples, and every
      * Monte Carlo run's error falls from its first checkpoint to its last */
@@ -213,10 +215,11 @@ Test(experiments, cornell_box_quick_forms_hold_their_claims, .timeout = 900)
 
 Test(experiments, furnace_and_formfactors_quick_forms_hold_their_claims, .timeout = 600)
 {
-    char root[64], cache[96];
+    char root[64], cache[512];
     snprintf(root, sizeof root, "/tmp/rp_exp_XXXXXX");
     cr_assert_not_null(mkdtemp(root));
-    snprintf(cache, sizeof cache, "%s/refs", root);
+    cr_assert_not_null(rp_test_ref_cache());
+    snprintf(cache, sizeof cache, "%s", rp_test_ref_cache());
 
     /* furnace: every iterative method reaches L = Le / (1 - rho) within the
      * quick tolerance 1e-2; Jacobi needs about ln(tol) / ln(rho) - 1 sweeps
@@ -285,10 +288,11 @@ Test(experiments, furnace_and_formfactors_quick_forms_hold_their_claims, .timeou
  * images of the camera's size with element boundaries drawn in yellow. */
 Test(experiments, discontinuity_quick_form_holds_its_claim, .timeout = 900)
 {
-    char root[64], cache[96];
+    char root[64], cache[512];
     snprintf(root, sizeof root, "/tmp/rp_exp_XXXXXX");
     cr_assert_not_null(mkdtemp(root));
-    snprintf(cache, sizeof cache, "%s/refs", root);
+    cr_assert_not_null(rp_test_ref_cache());
+    snprintf(cache, sizeof cache, "%s", rp_test_ref_cache());
     run_quick("discontinuity", root, cache);
     char *csv = read_out(root, "discontinuity", "discontinuity.csv");
     static const char *const scenes[2] = {"cornell", "original"};
@@ -349,10 +353,11 @@ static const char *ms_row(const char *csv, const char *scene, const char *label)
  * subdivided) costs the simplified solve under 1.5 times the memory. */
 Test(experiments, modelsize_quick_form_holds_its_claim, .timeout = 900)
 {
-    char root[64], cache[96];
+    char root[64], cache[512];
     snprintf(root, sizeof root, "/tmp/rp_exp_XXXXXX");
     cr_assert_not_null(mkdtemp(root));
-    snprintf(cache, sizeof cache, "%s/refs", root);
+    cr_assert_not_null(rp_test_ref_cache());
+    snprintf(cache, sizeof cache, "%s", rp_test_ref_cache());
     run_quick("modelsize", root, cache);
     char *csv = read_out(root, "modelsize", "methods.csv");
     /* columns: scene,method,seconds,memory_mib,faces,leaves,links,cluster_links,max_surface_err,worst */
