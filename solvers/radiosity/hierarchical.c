@@ -89,7 +89,7 @@ static const rp_option_spec hier_options[] = {
     {"cluster-face-rays", "N",
      "visibility rays per face below a receiving cluster, shared among the cluster's links (faces "
      "larger than 1/N of the cluster get more)",
-     "4"},
+     "16"},
     {"cluster-area", "FRAC",
      "with clustering, links to elements and clusters smaller than FRAC x the area of the faces "
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
