@@ -53,7 +53,10 @@
  *     coarser and the image as close to a finer solution;
  *   - a floor under a lamp and a blocker: its mean radiance against the
  *     one-bounce closed form (B-3 over the lamp), on four seeds, each
- *     within 0.1% and their mean within 0.04% (shadow_mean_is_unbiased). */
+ *     within 0.1% and their mean within 0.04% (shadow_mean_is_unbiased);
+ *   - --mesh discontinuity: no floor leaf crosses the outline of a box
+ *     standing on it (from the faces as given, some do), and the option is
+ *     refused, naming --simplify off, when a mesh was simplified. */
 #include <criterion/criterion.h>
 
 #include <gsl/gsl_errno.h>
@@ -701,6 +704,14 @@ Test(hier, refuses_bad_options, .init = hsetup)
     const char *few[] = {"max-faces", "5", NULL};
     cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, few, &err), RP_ERR_UNSUPPORTED);
     cr_assert(strstr(err.message, "6 faces"), "%s", err.message);
+    hrun_end(&r);
+    const char *mesh[] = {"mesh", "uniform", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, mesh, &err), RP_ERR_INPUT);
+    cr_assert(strstr(err.message, "--mesh") && strstr(err.message, "uniform"), "%s", err.message);
+    hrun_end(&r);
+    const char *segs[] = {"mesh-segments", "8", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, segs, &err), RP_ERR_INPUT);
+    cr_assert(strstr(err.message, "--mesh discontinuity"), "%s", err.message);
     hrun_end(&r);
     rp_scene_destroy(scene);
 }
@@ -1593,4 +1604,87 @@ Test(hier, shadow_mean_is_unbiased, .init = hsetup, .timeout = 300)
                 f_floor, f_block);
     cr_assert_lt(fabs(mean), 4e-4, "the seeds' mean is %+.3f%% off the closed form", 100 * mean);
     rp_scene_destroy(scene);
+}
+
+/* ---- --mesh discontinuity: the quadtrees start conforming ----------------- */
+
+/* A box standing on a floor under a lamp.  With --mesh discontinuity the
+ * floor is cut along the box's outline (a D0 line) before refinement, so
+ * no floor leaf has a corner inside the footprint and another outside it;
+ * starting from the faces as given, refinement stops at --min-area with
+ * leaves across the outline (the check's own control).  The footprint is
+ * [-0.3, 0.3] x [-0.2, 0.4]. */
+static size_t floor_leaves_across(const hier_state *s, uint32_t floor_surface)
+{
+    const double x0 = -0.3, x1 = 0.3, z0 = -0.2, z1 = 0.4, tol = 1e-9;
+    size_t across = 0;
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        if (nd->child != RP_NONE || s->faces[nd->face].surface != floor_surface)
+            continue;
+        int in = 0, out = 0;
+        for (int k = 0; k < nd->nverts; k++) {
+            rp_vec3 v = nd->v[k];
+            if (v.x > x0 + tol && v.x < x1 - tol && v.z > z0 + tol && v.z < z1 - tol)
+                in = 1;
+            else if (v.x < x0 - tol || v.x > x1 + tol || v.z < z0 - tol || v.z > z1 + tol)
+                out = 1;
+        }
+        across += in && out;
+    }
+    return across;
+}
+
+Test(hier, discontinuity_start_mesh_conforms, .init = hsetup, .timeout = 300)
+{
+    rp_scene *scene = rp_test_parse("bands grey\n"
+                                    "material floor reflect 0.5\n"
+                                    "material white reflect 0.7\n"
+                                    "material lamp reflect 0 emit 1\n"
+                                    "quad floor floor  -2 0 -2  -2 0 2  2 0 2  2 0 -2\n"
+                                    "box block white  -0.3 0 -0.2  0.3 0.5 0.4  outward\n"
+                                    "quad lamp lamp  -0.5 2 -0.5  0.5 2 -0.5  0.5 2 0.5  -0.5 2 0.5\n");
+    const uint32_t floor_surface = (uint32_t)surface_index(scene, "floor");
+    size_t across[2], leaves[2];
+    for (int m = 0; m < 2; m++) {
+        const char *kv[] = {"mesh", m ? "discontinuity" : "faces", NULL};
+        hrun r;
+        solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+        const hier_state *s = r.state;
+        across[m] = floor_leaves_across(s, floor_surface);
+        leaves[m] = rp_hierarchical_leaves(s, NULL, NULL, NULL, 0);
+        cr_log_info("--mesh %s: %zu faces, %zu leaves, %zu floor leaves across the box's outline",
+                    m ? "discontinuity" : "faces", s->nfaces, leaves[m], across[m]);
+        hrun_end(&r);
+    }
+    cr_assert_gt(across[0], 0, "the faces as given: some floor leaf should cross the outline");
+    cr_assert_eq(across[1], 0, "--mesh discontinuity: %zu floor leaves cross the box's outline", across[1]);
+    rp_scene_destroy(scene);
+}
+
+/* --mesh discontinuity cuts the faces as given: refused, naming the way
+ * out, when --simplify has simplified a mesh of the scene (a 2208-triangle
+ * sphere at --simplify 0.5). */
+Test(hier, discontinuity_start_mesh_refuses_a_simplified_mesh, .init = hsetup, .timeout = 120)
+{
+    char off[] = "/tmp/rp_hier_meshXXXXXX.off";
+    int fd = mkstemps(off, 4);
+    cr_assert(fd >= 0);
+    close(fd);
+    cr_assert_geq(off_sphere(off, 24, 0.3, 1.0, 0), RP_SIMPLIFY_MIN_FACES);
+    char text[1024];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial w reflect 0.5\nmaterial l reflect 0 emit 1\n"
+             "box room w -2 -2 -2 2 2 2 inward\nmesh ball w %s\n"
+             "quad lamp l -0.5 1.9 -0.5 0.5 1.9 -0.5 0.5 1.9 0.5 -0.5 1.9 0.5\n",
+             off);
+    rp_scene *scene = rp_test_parse(text);
+    rp_error err = {""};
+    hrun r;
+    const char *both[] = {"mesh", "discontinuity", "simplify", "0.5", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_SURFACES, 0, both, &err), RP_ERR_UNSUPPORTED);
+    cr_assert(strstr(err.message, "--simplify off"), "%s", err.message);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+    unlink(off);
 }

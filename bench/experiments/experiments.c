@@ -485,12 +485,12 @@ static const rp_experiment experiments[] = {
      .own_units = 1,
      .run = rp_exp_meshing},
     {.name = "discontinuity",
-     .summary = "uniform and discontinuity meshes (and hierarchical refinement): error against elements and time, "
-                "meshes drawn",
+     .summary = "uniform and discontinuity meshes (and hierarchical refinement from the faces and from their "
+                "discontinuity mesh): error against elements and time, meshes drawn",
      .scenes = "scenes/cornell.scene and scenes/real/CornellBox-Original.obj (boxes on the floor: contact shadows)",
      .claim = "at the same element count asked, Gauss-Seidel on a discontinuity mesh (elements following contact "
-              "lines and shadow boundaries) has a lower surface error than on a uniform mesh (hierarchical radiosity "
-              "runs 4 s, or 20 s in full, whatever --budget says)",
+              "lines and shadow boundaries) has a lower surface error than on a uniform mesh (hierarchical radiosity, "
+              "from the faces and from their discontinuity mesh, runs 4 s, or 20 s in full, whatever --budget says)",
      .quick = {60.0, 0, 256, NULL},
      .full = {300.0, 0, 2048, NULL},
      .own_units = 1,

@@ -159,6 +159,9 @@ typedef struct hier_state {
      * view.scene, which camera rays and final gathers see through view.rc;
      * the solution reaches their points through rp_solution_eval. */
     rp_recon_view view;
+    /* --mesh discontinuity: the scene's faces cut into triangles that
+     * conform to its D0 and D1 lines (owned; scene and view.scene are it) */
+    rp_scene *disc;
     size_t nb, nfaces;
     int threads;
     unsigned want;
@@ -394,6 +397,23 @@ static inline double hier_box_tol(rp_vec3 lo, rp_vec3 hi)
     double m = hier_max(hier_max(fabs(lo.x), fabs(hi.x)), hier_max(hier_max(fabs(lo.y), fabs(hi.y)),
                                                                   hier_max(fabs(lo.z), fabs(hi.z))));
     return 1e-9 * rp_v3_length(rp_v3_sub(hi, lo)) + 64 * DBL_EPSILON * m;
+}
+
+/* A node's size for the near and far tests: its area, or a quarter of its
+ * squared diameter when that is larger.  The two agree for squares, right
+ * and equilateral triangles; for the slivers of a discontinuity mesh
+ * (--mesh discontinuity) the area alone would call a long thin element
+ * far from a neighbour along it, and its kernel constant across it. */
+static inline double hier_extent2(const hier_node *nd)
+{
+    double d2 = 0;
+    for (int i = 0; i < nd->nverts; i++)
+        for (int j = i + 1; j < nd->nverts; j++) {
+            rp_vec3 e = rp_v3_sub(nd->v[i], nd->v[j]);
+            double l2 = rp_v3_dot(e, e);
+            d2 = l2 > d2 ? l2 : d2;
+        }
+    return 0.25 * d2 > nd->area ? 0.25 * d2 : nd->area;
 }
 
 /* Counter-based random numbers (a pure function of the key and the

@@ -173,7 +173,7 @@ double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_
         return 0; /* x sees the back of p (which is black and one-sided) */
     rp_vec3 d = rp_v3_sub(p->c, x);
     double r2 = rp_v3_dot(d, d);
-    if (far_ratio > 0 && r2 > far_ratio * p->area) {
+    if (far_ratio > 0 && r2 > far_ratio * hier_extent2(p)) {
         /* A disk of p's area facing along its normal (Wallace, Elmquist &
          * Haines 1989, eq. 6): F = A cos_q cos_p / (pi r^2 + A). */
         double r = sqrt(r2);
@@ -297,7 +297,7 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
     double F, Fmax, Fvar = 0;
     const int emitter = !fp->reflects;
     rp_vec3 dc = rp_v3_sub(p->c, q->c);
-    if (!straddle && rp_v3_dot(dc, dc) > HIER_NEAR_RATIO * q->area) {
+    if (!straddle && rp_v3_dot(dc, dc) > HIER_NEAR_RATIO * hier_extent2(q)) {
         F = Fmax = hier_point_to_node(s, q->c, fq->n, p, HIER_DISK_RATIO);
         if (emitter) {
             /* How much the kernel varies across q, from its four quarters. */
@@ -564,7 +564,7 @@ static int near_pair(const hier_state *s, const hier_link *l)
 {
     const hier_node *q = &s->nodes[l->recv], *p = &s->nodes[l->src];
     rp_vec3 d = rp_v3_sub(p->c, q->c);
-    return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * q->area;
+    return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(q);
 }
 
 /* Growable arrays (links, cluster links and entries, scratch): room for

@@ -41,12 +41,16 @@
 #include <string.h>
 
 #include "hier_internal.h"
+#include "../../geometry/discontinuity.h"
+#include "../../geometry/mesh.h"
 
 /* Defaults, relative to the scene (see the option help).  Chosen on the
  * Cornell box and the cube scenes: surface averages within 1% of a fine
  * reference (tests/test_hierarchical.c, README notes in the report). */
 #define HIER_DEFAULT_BF "5e-3"
 #define HIER_DEFAULT_MIN_AREA "2e-5"
+#define HIER_STR_(x) #x
+#define HIER_STR(x) HIER_STR_(x)
 
 static const rp_option_spec hier_options[] = {
     {"bf-epsilon", "EPS",
@@ -95,6 +99,13 @@ static const rp_option_spec hier_options[] = {
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity",
      "1e-3"},
     RP_SIMPLIFY_OPTION("auto"),
+    {"mesh", "faces|discontinuity",
+     "the quadtrees' roots: the faces as given, or the faces cut into triangles whose edges follow "
+     "contact lines (D0) and the umbra/penumbra boundaries of area lights (D1), so that no element "
+     "straddles them (the --mesh discontinuity of the uniform solvers, with no points inside a face)",
+     "faces"},
+    {"mesh-segments", "N", "--mesh discontinuity: D1 segments kept per face, the longest first (D0 all kept)",
+     HIER_STR(RP_DISC_DEFAULT_MAX_PER_FACE)},
     {"importance", "camera|surfaces|none|auto",
      "weigh the refinement by importance (Smits, Arvo & Salesin 1992): camera: what the image sees, "
      "surfaces: uniform over the faces that reflect, none: off (the BF oracle alone); auto: camera when "
@@ -132,11 +143,90 @@ static void hier_log(const hier_state *s, const char *fmt, ...)
     s->log(s->log_ctx, msg);
 }
 
+/* --mesh discontinuity: a copy of scene whose faces are cut into triangles
+ * whose edges follow the contact lines (D0) and the umbra and penumbra
+ * boundaries of the area lights (D1; geometry/mesh_disc.c, CGAL's
+ * constrained Delaunay triangulation), with no Steiner lattice inside a face
+ * (its spacing is the scene's diagonal): the coarsest mesh on which no
+ * element straddles those lines.  The quadtrees then start from it, and
+ * their midpoint subdivisions keep conforming (Heckbert 1992; Lischinski,
+ * Tampieri & Greenberg 1992, who also start hierarchical radiosity from a
+ * discontinuity mesh).  A floor leaf that crossed the outline of a box
+ * standing on it averaged the lit floor with the dark floor under the box. */
+static rp_status disc_start_scene(const rp_scene *scene, size_t max_segments, rp_scene **out, rp_error *err)
+{
+    rp_vec3 lo, hi;
+    rp_scene_bounds(scene, &lo, &hi);
+    rp_mesh_params mp = {.size = sizeof mp,
+                         .max_edge = rp_v3_length(rp_v3_sub(hi, lo)),
+                         .mode = RP_MESH_DISCONTINUITY,
+                         .max_segments = max_segments};
+    rp_mesh *mesh = NULL;
+    rp_status st = rp_mesh_create(scene, &mp, &mesh, err);
+    if (st != RP_OK)
+        return st;
+    const size_t ns = rp_scene_nsurfaces(scene), ne = rp_mesh_nelements(mesh), nv = rp_mesh_nvertices(mesh);
+    const rp_element *el = rp_mesh_elements(mesh);
+    const rp_vec3 *mv = rp_mesh_vertices(mesh);
+    rp_surface_triangles *tris = calloc(ns, sizeof *tris);
+    const rp_surface_triangles **replace = calloc(ns, sizeof *replace);
+    uint32_t *tri = malloc(6 * ne * sizeof *tri);
+    double *xyz = malloc(3 * nv * sizeof *xyz);
+    uint32_t *local = malloc(nv * sizeof *local);
+    if (!tris || !replace || !tri || !xyz || !local) {
+        st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for the discontinuity mesh");
+        goto done;
+    }
+    /* Surface by surface, in element order: its vertices renumbered from 0
+     * (shared within the surface, as the mesh shares them), a quad split
+     * along its diagonal 0-2. */
+    size_t ntri = 0, nxyz = 0;
+    for (size_t k = 0; k < ns; k++) {
+        size_t t0 = ntri, v0 = nxyz;
+        for (size_t v = 0; v < nv; v++)
+            local[v] = RP_NONE;
+        for (size_t e = 0; e < ne; e++) {
+            if (el[e].surface != k)
+                continue;
+            uint32_t w[4];
+            for (uint32_t j = 0; j < el[e].nverts; j++) {
+                uint32_t v = el[e].v[j];
+                if (local[v] == RP_NONE) {
+                    local[v] = (uint32_t)(nxyz - v0);
+                    xyz[3 * nxyz] = mv[v].x;
+                    xyz[3 * nxyz + 1] = mv[v].y;
+                    xyz[3 * nxyz + 2] = mv[v].z;
+                    nxyz++;
+                }
+                w[j] = local[v];
+            }
+            for (uint32_t j = 1; j + 1 < el[e].nverts; j++) {
+                tri[3 * ntri] = w[0];
+                tri[3 * ntri + 1] = w[j];
+                tri[3 * ntri + 2] = w[j + 1];
+                ntri++;
+            }
+        }
+        tris[k] = (rp_surface_triangles){xyz + 3 * v0, nxyz - v0, tri + 3 * t0, ntri - t0};
+        replace[k] = &tris[k];
+    }
+    st = rp_scene_with_surfaces(scene, replace, out, NULL, err);
+done:
+    free(tris);
+    free(replace);
+    free(tri);
+    free(xyz);
+    free(local);
+    rp_mesh_destroy(mesh);
+    return st;
+}
+
 static void hier_fini(void *state)
 {
     hier_state *s = state;
     rp_raycast_destroy(s->rc);
     rp_recon_view_fini(&s->view);
+    rp_scene_destroy(s->disc);
     free(s->faces);
     free(s->nodes);
     free(s->B);
@@ -256,6 +346,26 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     /* --simplify first: everything below reads the scene solved on. */
     if ((st = rp_recon_view_init(&s->view, o, scene, &scene, err)) != RP_OK)
         return st;
+    /* Then --mesh: the faces as given, or cut along their discontinuities
+     * (the camera sees the cut copy too: the same geometry). */
+    const char *mm = rp_options_word(o, "mesh");
+    unsigned long segs = RP_DISC_DEFAULT_MAX_PER_FACE;
+    if ((st = rp_options_uint(o, "mesh-segments", 1, 1u << 20, &segs, err)) != RP_OK)
+        return st;
+    if (mm && strcmp(mm, "faces") != 0 && strcmp(mm, "discontinuity") != 0)
+        return rp_error_set(err, RP_ERR_INPUT, "hierarchical: --mesh: '%s' is not faces or discontinuity", mm);
+    if (mm && strcmp(mm, "discontinuity") == 0) {
+        if (s->view.sol && rp_solution_nsimplified(s->view.sol) > 0)
+            return rp_error_set(err, RP_ERR_UNSUPPORTED,
+                                "hierarchical: --mesh discontinuity cuts the faces as given, and --simplify "
+                                "has simplified a mesh of this scene: add --simplify off");
+        if ((st = disc_start_scene(s->view.scene, segs, &s->disc, err)) != RP_OK)
+            return st;
+        rp_recon_view_fini(&s->view); /* an unsimplified copy, if any */
+        scene = s->disc;
+        s->view.scene = scene;
+    } else if (rp_options_get(o, "mesh-segments"))
+        return rp_error_set(err, RP_ERR_INPUT, "hierarchical: --mesh-segments needs --mesh discontinuity");
     s->scene = scene;
     s->nb = rp_scene_nbands(scene);
     s->nfaces = rp_scene_nfaces(scene);
@@ -458,7 +568,7 @@ static void source_value(const hier_state *s, hier_link *l, const double *X, dou
          * kernel A_k cos cos / r^2 at the children's centroids gives them
          * to about a percent (measured: the Cornell box's surface averages
          * move by under 0.01%), nearer the contour integral. */
-        int far = rp_v3_dot(dp, dp) > HIER_NEAR_RATIO * p->area;
+        int far = rp_v3_dot(dp, dp) > HIER_NEAR_RATIO * hier_extent2(p);
         for (int k = 0; k < 4; k++) {
             const hier_node *c = &s->nodes[p->child + k];
             if (far) {
