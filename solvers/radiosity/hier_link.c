@@ -6,7 +6,9 @@
  * disk approximation F = A cos cos / (pi r^2 + A) when p is far away), or
  * for near pairs the midpoint rule over q's four quarters, times the
  * visibility of a few jittered ray pairs between q and p (Embree,
- * rp_ray_occluded), each pair weighted by its kernel.  Shaft culling
+ * rp_ray_occluded), each pair weighted by its kernel: two independent
+ * sets, one deciding the link's refinement and one measuring the
+ * visibility it keeps (link_rays_cast), so that shadows are unbiased.  Shaft culling
  * (Haines & Wallace 1994) skips the rays when no face can lie between the
  * two: for every pair of faces the faces that might block a segment
  * between them are listed once (a face can only if its box meets the
