@@ -119,7 +119,7 @@ $(BUILD)/geometry/cgal/simplify.o: CXXFLAGS += -Wno-maybe-uninitialized
 $(BUILD)/bench/run/plugin.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"'
 $(BUILD)/bench/cli/main.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"' -DRP_GIT_DESCRIBE='"$(GIT_DESCRIBE)"'
 $(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"' \
-    -DRP_BUILD_DIR='"$(CURDIR)/$(BUILD)"'
+    -DRP_BUILD_DIR='"$(CURDIR)/$(BUILD)"' -DRP_BUILD_OPT='"$(OPT)"' -DRP_BUILD_SANITIZE='"$(SANITIZE)"'
 
 meshes: $(MESHES)
 scenes/data/%.off:
