@@ -167,6 +167,7 @@ static rp_status disc_start_scene(const rp_scene *scene, size_t max_segments, rp
         return st;
     const size_t ns = rp_scene_nsurfaces(scene), ne = rp_mesh_nelements(mesh), nv = rp_mesh_nvertices(mesh);
     const rp_element *el = rp_mesh_elements(mesh);
+    const rp_surface *surf = rp_scene_surfaces(scene);
     const rp_vec3 *mv = rp_mesh_vertices(mesh);
     rp_surface_triangles *tris = calloc(ns, sizeof *tris);
     const rp_surface_triangles **replace = calloc(ns, sizeof *replace);
@@ -177,35 +178,49 @@ static rp_status disc_start_scene(const rp_scene *scene, size_t max_segments, rp
         st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for the discontinuity mesh");
         goto done;
     }
-    /* Surface by surface, in element order: its vertices renumbered from 0
-     * (shared within the surface, as the mesh shares them), a quad split
-     * along its diagonal 0-2. */
+    /* Surface by surface (its faces, then each face's elements, which the
+     * mesh keeps contiguous): its vertices renumbered from 0 (shared within
+     * the surface, as the mesh shares them), a quad split along its
+     * diagonal 0-2.  local[] is reset by the same walk, so the whole costs
+     * one pass over the elements, however many surfaces. */
+    for (size_t v = 0; v < nv; v++)
+        local[v] = RP_NONE;
     size_t ntri = 0, nxyz = 0;
     for (size_t k = 0; k < ns; k++) {
         size_t t0 = ntri, v0 = nxyz;
-        for (size_t v = 0; v < nv; v++)
-            local[v] = RP_NONE;
-        for (size_t e = 0; e < ne; e++) {
-            if (el[e].surface != k)
-                continue;
-            uint32_t w[4];
-            for (uint32_t j = 0; j < el[e].nverts; j++) {
-                uint32_t v = el[e].v[j];
-                if (local[v] == RP_NONE) {
-                    local[v] = (uint32_t)(nxyz - v0);
-                    xyz[3 * nxyz] = mv[v].x;
-                    xyz[3 * nxyz + 1] = mv[v].y;
-                    xyz[3 * nxyz + 2] = mv[v].z;
-                    nxyz++;
+        const uint32_t f0 = surf[k].first_face, f1 = f0 + surf[k].nfaces;
+        for (uint32_t f = f0; f < f1; f++) {
+            uint32_t e0, cnt;
+            rp_mesh_face_elements(mesh, f, &e0, &cnt);
+            for (uint32_t e = e0; e < e0 + cnt; e++) {
+                uint32_t w[4];
+                for (uint32_t j = 0; j < el[e].nverts; j++) {
+                    uint32_t v = el[e].v[j];
+                    if (local[v] == RP_NONE) {
+                        local[v] = (uint32_t)(nxyz - v0);
+                        xyz[3 * nxyz] = mv[v].x;
+                        xyz[3 * nxyz + 1] = mv[v].y;
+                        xyz[3 * nxyz + 2] = mv[v].z;
+                        nxyz++;
+                    }
+                    w[j] = local[v];
                 }
-                w[j] = local[v];
+                for (uint32_t j = 1; j + 1 < el[e].nverts; j++) {
+                    tri[3 * ntri] = w[0];
+                    tri[3 * ntri + 1] = w[j];
+                    tri[3 * ntri + 2] = w[j + 1];
+                    ntri++;
+                }
             }
-            for (uint32_t j = 1; j + 1 < el[e].nverts; j++) {
-                tri[3 * ntri] = w[0];
-                tri[3 * ntri + 1] = w[j];
-                tri[3 * ntri + 2] = w[j + 1];
-                ntri++;
-            }
+        }
+        /* local[] back to RP_NONE for the next surface: the vertices of
+         * this surface's elements. */
+        for (uint32_t f = f0; f < f1; f++) {
+            uint32_t e0, cnt;
+            rp_mesh_face_elements(mesh, f, &e0, &cnt);
+            for (uint32_t e = e0; e < e0 + cnt; e++)
+                for (uint32_t j = 0; j < el[e].nverts; j++)
+                    local[el[e].v[j]] = RP_NONE;
         }
         tris[k] = (rp_surface_triangles){xyz + 3 * v0, nxyz - v0, tri + 3 * t0, ntri - t0};
         replace[k] = &tris[k];
