@@ -6,6 +6,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "log.h"
 #include <time.h>
 
 #include "cgal/simplify.h"
@@ -26,18 +28,6 @@ struct rp_solution {
     size_t nsimplified;
     double max_distance;
 };
-
-static void say(void (*log)(void *, const char *), void *ctx, const char *fmt, ...)
-{
-    if (!log)
-        return;
-    char buf[512];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(buf, sizeof buf, fmt, ap);
-    va_end(ap);
-    log(ctx, buf);
-}
 
 void rp_solution_destroy(rp_solution *sol)
 {
@@ -148,7 +138,7 @@ rp_status rp_solution_create(const rp_scene *full, double ratio, double toleranc
             goto done;
         }
         if (r > 0) {
-            say(log, log_ctx, "simplify: surface '%s' (%s:%d) kept as it is (%u triangles): %s", surf[k].name,
+            rp_logf(log, log_ctx, "simplify: surface '%s' (%s:%d) kept as it is (%u triangles): %s", surf[k].name,
                 surf[k].file ? surf[k].file : "?", surf[k].line, surf[k].nfaces, msg);
             continue;
         }
@@ -157,7 +147,7 @@ rp_status rp_solution_create(const rp_scene *full, double ratio, double toleranc
         sol->nsimplified++;
         double d = fmax(simp[k].max_distance_in, simp[k].max_distance_out);
         sol->max_distance = fmax(sol->max_distance, d);
-        say(log, log_ctx,
+        rp_logf(log, log_ctx,
             "simplify: surface '%s' %u -> %zu triangles; largest distance between the two at their vertices "
             "%.3g (%.2g%% of the scene's diagonal)%s; %.2f s",
             surf[k].name, surf[k].nfaces, simp[k].ntriangles, d, diag > 0 ? 100 * d / diag : 0,

@@ -22,7 +22,7 @@
 #include "bench/report/plot.h"
 #include "bench/experiments/exp_internal.h"
 #include "bench/run/load.h"
-#include "bench/run/log.h"
+#include "geometry/log.h"
 #include "bench/run/mpi.h"
 
 /* ------------------------------------------------------------- helpers */

@@ -12,7 +12,7 @@
 
 #include "bench/report/files.h"
 #include "bench/run/clock.h"
-#include "bench/run/log.h"
+#include "geometry/log.h"
 #include "bench/run/mpi.h"
 
 /* ------------------------------------------------------------- specs */

@@ -42,7 +42,9 @@
 
 #include "hier_internal.h"
 #include "../../geometry/discontinuity.h"
+#include "../../geometry/log.h"
 #include "../../geometry/mesh.h"
+#include "system.h"
 
 /* Defaults, relative to the scene (see the option help).  Chosen on the
  * Cornell box and the cube scenes: surface averages within 1% of a fine
@@ -133,14 +135,10 @@ static void hier_log(const hier_state *s, const char *fmt, ...)
 
 static void hier_log(const hier_state *s, const char *fmt, ...)
 {
-    if (!s->log)
-        return;
-    char msg[512];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
+    rp_vlogf(s->log, s->log_ctx, fmt, ap);
     va_end(ap);
-    s->log(s->log_ctx, msg);
 }
 
 /* --mesh discontinuity: a copy of scene whose faces are cut into triangles
@@ -364,12 +362,13 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     /* Then --mesh: the faces as given, or cut along their discontinuities
      * (the camera sees the cut copy too: the same geometry). */
     const char *mm = rp_options_word(o, "mesh");
-    unsigned long segs = RP_DISC_DEFAULT_MAX_PER_FACE;
-    if ((st = rp_options_uint(o, "mesh-segments", 1, 1u << 20, &segs, err)) != RP_OK)
-        return st;
     if (mm && strcmp(mm, "faces") != 0 && strcmp(mm, "discontinuity") != 0)
         return rp_error_set(err, RP_ERR_INPUT, "hierarchical: --mesh: '%s' is not faces or discontinuity", mm);
-    if (mm && strcmp(mm, "discontinuity") == 0) {
+    const int disc = mm && strcmp(mm, "discontinuity") == 0;
+    unsigned long segs;
+    if ((st = rp_rad_mesh_segments("hierarchical", o, disc, &segs, err)) != RP_OK)
+        return st;
+    if (disc) {
         if (s->view.sol && rp_solution_nsimplified(s->view.sol) > 0)
             return rp_error_set(err, RP_ERR_UNSUPPORTED,
                                 "hierarchical: --mesh discontinuity cuts the faces as given, and --simplify "
@@ -379,8 +378,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         rp_recon_view_fini(&s->view); /* an unsimplified copy, if any */
         scene = s->disc;
         s->view.scene = scene;
-    } else if (rp_options_get(o, "mesh-segments"))
-        return rp_error_set(err, RP_ERR_INPUT, "hierarchical: --mesh-segments needs --mesh discontinuity");
+    }
     s->scene = scene;
     s->nb = rp_scene_nbands(scene);
     s->nfaces = rp_scene_nfaces(scene);

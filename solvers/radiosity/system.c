@@ -10,6 +10,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../geometry/log.h"
+
 /* Rows computed together by one parallel block when F is not stored. */
 #define RAD_ROW_BLOCK 64
 #define MIB(x) ((double)(x) / (1024.0 * 1024.0))
@@ -72,14 +74,10 @@ int rp_rad_threads(const rp_rad_system *s)
 
 void rp_rad_log(const rp_rad_system *s, const char *fmt, ...)
 {
-    if (!s->log)
-        return;
-    char msg[512];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof msg, fmt, ap);
+    rp_vlogf(s->log, s->log_ctx, fmt, ap);
     va_end(ap);
-    s->log(s->log_ctx, msg);
 }
 
 void rp_rad_system_fini(rp_rad_system *s)
@@ -129,12 +127,22 @@ rp_status rp_rad_mesh_params(const char *method, const rp_options *o, rp_mesh_pa
         mp->mode = RP_MESH_DISCONTINUITY;
     else
         return rp_error_set(err, RP_ERR_INPUT, "%s: --mesh: '%s' is not uniform or discontinuity", method, mode);
-    unsigned long segs = RP_DISC_DEFAULT_MAX_PER_FACE;
-    if ((st = rp_options_uint(o, "mesh-segments", 1, 1u << 20, &segs, err)) != RP_OK)
+    unsigned long segs;
+    if ((st = rp_rad_mesh_segments(method, o, mp->mode == RP_MESH_DISCONTINUITY, &segs, err)) != RP_OK)
         return st;
-    if (rp_options_get(o, "mesh-segments") && mp->mode != RP_MESH_DISCONTINUITY)
-        return rp_error_set(err, RP_ERR_INPUT, "%s: --mesh-segments needs --mesh discontinuity", method);
     mp->max_segments = segs;
+    return RP_OK;
+}
+
+rp_status rp_rad_mesh_segments(const char *method, const rp_options *o, int disc, unsigned long *segs,
+                               rp_error *err)
+{
+    *segs = RP_DISC_DEFAULT_MAX_PER_FACE;
+    rp_status st = rp_options_uint(o, "mesh-segments", 1, 1u << 20, segs, err);
+    if (st != RP_OK)
+        return st;
+    if (rp_options_get(o, "mesh-segments") && !disc)
+        return rp_error_set(err, RP_ERR_INPUT, "%s: --mesh-segments needs --mesh discontinuity", method);
     return RP_OK;
 }
 

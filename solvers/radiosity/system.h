@@ -231,6 +231,13 @@ rp_status rp_rad_init_agree(const rp_comm *c, rp_status st, rp_error *err);
 rp_status rp_rad_mesh_params(const char *method, const rp_options *o, rp_mesh_params *mp,
                              rp_error *err);
 
+/* --mesh-segments N, the D1 segments the discontinuity mesh keeps per face
+ * (RP_DISC_DEFAULT_MAX_PER_FACE when not given), into *segs; refused unless
+ * the method meshes by discontinuities (disc).  Shared with hierarchical's
+ * --mesh discontinuity start mesh. */
+rp_status rp_rad_mesh_segments(const char *method, const rp_options *o, int disc, unsigned long *segs,
+                               rp_error *err);
+
 rp_status rp_rad_system_init(rp_rad_system *s, const rp_rad_config *cfg, const rp_scene *scene,
                              const rp_options *o, rp_error *err);
 void rp_rad_system_fini(rp_rad_system *s);

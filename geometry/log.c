@@ -1,10 +1,10 @@
 /* Log lines (log.h). */
-#include "bench/run/log.h"
+#include "log.h"
 
 #include <stdarg.h>
 #include <stdio.h>
 
-void rp_vlogf(rp_log_fn log, void *ctx, const char *fmt, va_list ap)
+void rp_vlogf(void (*log)(void *ctx, const char *message), void *ctx, const char *fmt, va_list ap)
 {
     if (!log)
         return;
@@ -13,7 +13,7 @@ void rp_vlogf(rp_log_fn log, void *ctx, const char *fmt, va_list ap)
     log(ctx, msg);
 }
 
-void rp_logf(rp_log_fn log, void *ctx, const char *fmt, ...)
+void rp_logf(void (*log)(void *ctx, const char *message), void *ctx, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
