@@ -318,7 +318,10 @@ Test(mpi, experiment_units_are_handed_out_to_ranks)
     cr_assert_eq(r.status, 0, "%s", r.err);
     rp_run_free(&r);
     snprintf(dir, sizeof dir, "%s/f1", tmpdir);
-    for (int k = 2; k <= 3; k++) {
+    /* 3 ranks, not a power of two (2 ranks hand out the stability study's
+     * units in stability_resumed_by_ranks_equals_a_plain_run) */
+    {
+        const int k = 3;
         char other[160];
         snprintf(other, sizeof other, "%s/f%d", tmpdir, k);
         snprintf(args, sizeof args, "experiment formfactors --quick -o %s", other);
@@ -329,7 +332,7 @@ Test(mpi, experiment_units_are_handed_out_to_ranks)
         cr_expect_eq(n, 36, "K=%d", k);
         cr_expect_eq(m, (n + k - 1) / k, "K=%d: rank 0 computed %ld of %ld", k, m, n);
         rp_run_free(&r);
-        cr_expect_eq(same_tables(dir, other, k == 2 ? "K=2" : "K=3"), 1);
+        cr_expect_eq(same_tables(dir, other, "K=3"), 1);
         /* the journal holds every unit once: its two head lines and 36 */
         char path[200];
         snprintf(path, sizeof path, "%s/journal.txt", other);
@@ -374,10 +377,10 @@ Test(mpi, stability_resumed_by_ranks_equals_a_plain_run)
     rp_run r = rp_run_radpt(args);
     cr_assert_eq(r.status, 0, "%s", r.err);
     rp_run_free(&r);
-    /* interrupted after 10 units, resumed by 2 ranks: 10 units read back,
-     * the rest handed out; every table equal but its times */
+    /* interrupted after 112 units (of 137), resumed by 2 ranks: 112 units
+     * read back, the rest handed out; every table equal but its times */
     snprintf(other, sizeof other, "%s/s2", tmpdir);
-    cut_journal(plain, other, 10);
+    cut_journal(plain, other, 112);
     snprintf(args, sizeof args, "experiment stability --quick --threads 1 --resume %s", other);
     r = rp_run_radpt_mpi(2, args);
     cr_assert_eq(r.status, 0, "%s", r.err);
