@@ -1417,7 +1417,9 @@ Test(hier, importance_two_plates_closed_form, .init = hsetup)
         cr_assert_eq(s->nimp_hits, m == 0 ? 32 * 32 : 0, "the camera sees plate 1 only");
         for (int k = 0; k < 2; k++) {
             cr_log_info("%s: y_%d %.12f, closed form %.12f", mode[m], k + 1, s->Y[k], want[m][k]);
-            cr_assert_float_eq(s->Y[k], want[m][k], 1e-9 * want[m][k], "%s: y_%d %.12g vs %.12g", mode[m], k + 1,
+            /* 1e-6: a link keeps its form factor in single precision
+             * (relative rounding 6e-8), the rest is solved to 1e-14 */
+            cr_assert_float_eq(s->Y[k], want[m][k], 1e-6 * want[m][k], "%s: y_%d %.12g vs %.12g", mode[m], k + 1,
                                s->Y[k], want[m][k]);
         }
         hrun_end(&r);

@@ -242,21 +242,7 @@ struct hier_vertices {
 /* The source's radiosity as the gather saw it (hierarchical.c,
  * source_radiosity): the kernel-weighted children where the shares are
  * known, else the node's own mean. */
-static void link_source(const hier_state *s, const hier_link *l, double *out)
-{
-    const size_t nb = s->nb;
-    const hier_node *p = &s->nodes[l->src];
-    if (p->child == RP_NONE || !(l->frac[0] >= 0)) {
-        memcpy(out, s->B + (size_t)l->src * nb, nb * sizeof *out);
-        return;
-    }
-    double fs = (double)l->frac[0] + l->frac[1] + l->frac[2] + l->frac[3];
-    for (size_t b = 0; b < nb; b++)
-        out[b] = 0;
-    for (int k = 0; k < 4; k++)
-        for (size_t b = 0; b < nb; b++)
-            out[b] += l->frac[k] * s->B[(size_t)(p->child + k) * nb + b] / fs;
-}
+static void link_source(const hier_state *s, const hier_link *l, double *out) { hier_source_mean(s, l, s->B, out); }
 
 /* The visible fraction of source p seen from x (normal n): m x m jittered
  * strata on p, each weighted by the kernel cos cos / r^2, as hier_link.c

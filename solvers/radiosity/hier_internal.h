@@ -53,22 +53,33 @@ enum {
     HIER_LINK_PARTIAL = 1u << 0,  /* some visibility rays blocked */
     HIER_LINK_STRADDLE = 1u << 1, /* one element crosses the other's plane */
     HIER_LINK_TESTED = 1u << 2,   /* visibility was sampled by rays */
-    HIER_LINK_INVISIBLE = 1u << 3 /* every deciding ray blocked: kept only
+    HIER_LINK_INVISIBLE = 1u << 3, /* every deciding ray blocked: kept only
                                      until the oracle decides not to refine
                                      it, unless the value's rays found it
                                      visible (hier_link_eval) */
+    HIER_LINK_SHARES = 1u << 4    /* share[] holds the source's children's
+                                     shares (hierarchical.c, source_value) */
 };
 
-/* A one-way link: the receiver gathers rho F B_src through it. */
+/* A link's shares of its source's four children are kept in 16 bits as
+ * multiples of 1/HIER_SHARE_ONE; the fourth is what the first three leave,
+ * so they add up to exactly one (hier_link_set_shares). */
+#define HIER_SHARE_ONE 65535u
+
+/* A one-way link: the receiver gathers rho F B_src through it.  24 bytes:
+ * links are most of the method's memory (the bunny scene: 1.06M links,
+ * 0.75M cluster links, 2.6M cluster entries), and single precision is
+ * ample for one link's form factor and shares (their sums are taken in
+ * double). */
 typedef struct hier_link {
     uint32_t recv, src;
-    double F;        /* form-factor estimate times visibility */
-    float F_err;     /* the oracle's form-factor bound (unoccluded estimate
-                        for partial or straddling links) */
-    uint32_t flags;
-    float frac[4];   /* shares of the source's four children in the kernel
-                        seen from the receiver's centre; frac[0] < 0 until
-                        the source has children (hierarchical.c) */
+    float F;          /* form-factor estimate times visibility */
+    float F_err;      /* the oracle's form-factor bound (unoccluded estimate
+                         for partial or straddling links) */
+    uint16_t share[3]; /* the source's children 0-2 in the kernel seen from
+                          the receiver's centre, when flags has
+                          HIER_LINK_SHARES; child 3 has the rest */
+    uint16_t flags;
 } hier_link;
 
 /* What is fixed per scene face. */
@@ -419,6 +430,34 @@ static inline double hier_extent2(const hier_node *nd)
 /* Counter-based random numbers (a pure function of the key and the
  * dimension), so results do not depend on the thread schedule:
  * splitmix64's finaliser (Steele, Lea & Flood 2014) as the mixer. */
+/* Stores shares w[0..3] (>= 0, adding up to one) in l: each is rounded
+ * through the running sum, so none is negative and they add up to
+ * HIER_SHARE_ONE exactly. */
+static inline void hier_link_set_shares(hier_link *l, const double w[4])
+{
+    double run = 0;
+    uint32_t prev = 0;
+    for (int k = 0; k < 3; k++) {
+        run += w[k];
+        double c = floor(run * HIER_SHARE_ONE + 0.5);
+        uint32_t ck = c <= prev ? prev : (c >= HIER_SHARE_ONE ? HIER_SHARE_ONE : (uint32_t)c);
+        l->share[k] = (uint16_t)(ck - prev);
+        prev = ck;
+    }
+    l->flags |= HIER_LINK_SHARES;
+}
+
+/* The four shares of l as fractions (adding up to one). */
+static inline void hier_link_shares(const hier_link *l, double w[4])
+{
+    uint32_t rest = HIER_SHARE_ONE;
+    for (int k = 0; k < 3; k++) {
+        w[k] = (double)l->share[k] / HIER_SHARE_ONE;
+        rest -= l->share[k];
+    }
+    w[3] = (double)rest / HIER_SHARE_ONE;
+}
+
 static inline uint64_t hier_mix(uint64_t z)
 {
     z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
@@ -452,7 +491,12 @@ static inline void hier_shuffle(uint32_t *perm, unsigned n, uint64_t key, uint64
 }
 
 /* Growable scratch arrays: room for need items of size bytes in *a
- * (capacity *cap, doubling from 1024); 0 when out of memory. */
+ * (capacity *cap, from 1024 growing by half); 0 when out of memory. */
 int hier_grow(void **a, size_t *cap, size_t need, size_t size);
+
+/* X (nb values per node) of link l's source as the link sees it: its
+ * children weighted by the link's shares once they are known
+ * (HIER_LINK_SHARES), else the source's own value (hierarchical.c). */
+void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, double *out);
 
 #endif

@@ -379,8 +379,8 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
     }
     out->recv = qi;
     out->src = pi;
-    out->frac[0] = -1;
-    out->F = F * vis;
+    out->share[0] = out->share[1] = out->share[2] = 0;
+    out->F = (float)(F * vis);
     if (flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE))
         out->F_err = (float)(s->partial_weight * Fmax);
     else if (emitter)
@@ -396,7 +396,7 @@ int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out
          * 1/sqrt(N) undetected at most, not the whole unoccluded form
          * factor. */
         out->F_err = (float)(s->invisible_weight * Fmax);
-    out->flags = flags;
+    out->flags = (uint16_t)flags;
     return (flags & HIER_LINK_INVISIBLE) && !(vis > 0) ? 2 : 1;
 }
 

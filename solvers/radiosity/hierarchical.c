@@ -561,17 +561,31 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
  * form factors from the receiver's centre to each, F_qp B_p -> sum_k
  * F_qk B_k (the link's transport integral, Hanrahan et al. 1991, eq. 2,
  * by the midpoint rule one level below the source), computed once per
- * link and kept in l->frac; they sum to 1, so a uniform source, and the
+ * link and kept in l->share; they sum to 1, so a uniform source, and the
  * form-factor row sums, are unchanged. */
-static void source_value(const hier_state *s, hier_link *l, const double *X, double *out)
+void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, double *out)
 {
     const size_t nb = s->nb;
     const hier_node *p = &s->nodes[l->src];
-    if (p->child == RP_NONE) {
+    if (p->child == RP_NONE || !(l->flags & HIER_LINK_SHARES)) {
         memcpy(out, X + (size_t)l->src * nb, nb * sizeof *out);
         return;
     }
-    if (!(l->frac[0] >= 0)) {
+    double w[4];
+    hier_link_shares(l, w);
+    for (size_t b = 0; b < nb; b++)
+        out[b] = 0;
+    for (int k = 0; k < 4; k++) {
+        const double *Xc = X + (size_t)(p->child + k) * nb;
+        for (size_t b = 0; b < nb; b++)
+            out[b] += w[k] * Xc[b];
+    }
+}
+
+static void source_value(const hier_state *s, hier_link *l, const double *X, double *out)
+{
+    const hier_node *p = &s->nodes[l->src];
+    if (p->child != RP_NONE && !(l->flags & HIER_LINK_SHARES)) {
         const hier_node *q = &s->nodes[l->recv];
         rp_vec3 n = s->faces[q->face].n, np = s->faces[p->face].n;
         double w[4], ws = 0;
@@ -593,20 +607,10 @@ static void source_value(const hier_state *s, hier_link *l, const double *X, dou
             ws += w[k];
         }
         for (int k = 0; k < 4; k++)
-            l->frac[k] = (float)(ws > 0 ? w[k] / ws : s->nodes[p->child + k].area / p->area);
+            w[k] = ws > 0 ? w[k] / ws : s->nodes[p->child + k].area / p->area;
+        hier_link_set_shares(l, w);
     }
-    /* Divided by their sum in double precision: stored as floats, the
-     * shares add up to 1 only to about 1e-7. */
-    double fs = (double)l->frac[0] + l->frac[1] + l->frac[2] + l->frac[3];
-    for (size_t b = 0; b < nb; b++)
-        out[b] = 0;
-    for (int k = 0; k < 4; k++) {
-        const double *Bc = X + (size_t)(p->child + k) * nb;
-        for (size_t b = 0; b < nb; b++)
-            out[b] += l->frac[k] * Bc[b];
-    }
-    for (size_t b = 0; b < nb; b++)
-        out[b] /= fs;
+    hier_source_mean(s, l, X, out);
 }
 
 static void source_radiosity(const hier_state *s, hier_link *l, double *out) { source_value(s, l, s->B, out); }
