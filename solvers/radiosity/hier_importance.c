@@ -46,9 +46,9 @@
  * Faces that do not reflect get no direct importance: their radiosity is
  * their emission, exact whatever the links.
  *
- * The oracle (hier_link.c decide, hier_cluster.c cl_decide) weighs a
- * link's transfer by importance, as Smits et al. 1992 refine: a link q <- p
- * is refined while
+ * The oracle for quadtree links (hier_link.c decide) weighs a link's
+ * transfer by importance, as Smits et al. 1992 refine: a link q <- p is
+ * refined while
  *
  *     F_err max(rho_q B_p y_q, rho_p y_p B_q) / ybar  >  bf_epsilon
  *
@@ -63,7 +63,8 @@
  * a link from a pure emitter, rho_p = 0, is then judged exactly as
  * without importance at uniform y.)  A face-level link whose visibility
  * rays were all blocked is judged without importance (hier_link.c): the
- * oracle's "keep" drops it for good.
+ * oracle's "keep" drops it for good.  Cluster links are judged without
+ * importance too (hier_cluster.c cl_decide, where the measurements are).
  *
  * Determinism: the camera rays are one per pixel, written to their own
  * slots; every sum here runs in node or hit order. */
@@ -116,7 +117,7 @@ rp_status hier_importance_init(hier_state *s, rp_error *err)
     }
     const size_t nb = s->nb;
     s->Y = malloc(s->cap_nodes * nb * sizeof *s->Y);
-    if (!s->Y || (s->clustering && !(s->cl_Y = calloc(s->ncl ? s->ncl * nb : 1, sizeof *s->cl_Y))))
+    if (!s->Y)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for importance");
     rp_status st = hier_importance_direct(s, err);
     if (st != RP_OK)
@@ -204,31 +205,6 @@ void hier_importance_finish(hier_state *s)
         a += nd->area * y;
     }
     s->y_scale = ay > 0 ? a / ay : 0;
-    if (!s->clustering)
-        return;
-    /* Area means over the face roots, children after parents in preorder:
-     * so from the last cluster back (as hier_cluster.c's cluster_pull). */
-    for (size_t c = s->ncl; c-- > 0;) {
-        const hier_cluster *k = &s->cl[c];
-        double *Y = s->cl_Y + c * nb;
-        for (size_t b = 0; b < nb; b++)
-            Y[b] = 0;
-        for (int j = 0; j < 2; j++) {
-            uint32_t it = k->child[j]; /* face roots below nfaces, clusters above */
-            const double *Yc;
-            double ac;
-            if (it >= s->nfaces) {
-                Yc = s->cl_Y + (size_t)(it - s->nfaces) * nb;
-                ac = s->cl[it - s->nfaces].area;
-            } else {
-                Yc = s->Y + (size_t)it * nb;
-                ac = s->nodes[it].area;
-            }
-            double w = k->area > 0 ? ac / k->area : 0.5;
-            for (size_t b = 0; b < nb; b++)
-                Y[b] += w * Yc[b];
-        }
-    }
 }
 
 double hier_importance_error(const hier_state *s, const double *rho_q, const double *Bq, const double *Yq,
@@ -244,8 +220,7 @@ void hier_importance_free(hier_state *s)
 {
     free(s->Y);
     free(s->Y0);
-    free(s->cl_Y);
     free(s->imp_hits);
-    s->Y = s->Y0 = s->cl_Y = NULL;
+    s->Y = s->Y0 = NULL;
     s->imp_hits = NULL;
 }

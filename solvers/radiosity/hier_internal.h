@@ -254,7 +254,6 @@ typedef struct hier_state {
                             node, like B), grown with the nodes */
     double *Y0;          /* nnodes: direct importance density (leaves) */
     size_t cap_Y0;
-    double *cl_Y;        /* ncl x nb: area-mean importance of each cluster */
     hier_imp_hit *imp_hits; /* camera: the pixel-centre rays' hits */
     size_t nimp_hits;
     double imp_pixels;   /* camera: pixels in the image (hits weigh 1 / it) */
@@ -365,7 +364,7 @@ double hier_cluster_bound(const hier_state *s, uint32_t recv, uint32_t src);
 rp_status hier_importance_init(hier_state *s, rp_error *err);
 /* Fills s->Y0 for the current leaves (density: importance per unit area). */
 rp_status hier_importance_direct(hier_state *s, rp_error *err);
-/* After an importance sweep: the clusters' importance and y_scale. */
+/* After an importance sweep: y_scale (1 / ybar). */
 void hier_importance_finish(hier_state *s);
 /* The oracle's weight of the transfer q <- p through F (max over bands of
  * F (rho_q B_p Y_q + ...) y_scale), for items (nodes or clusters):

@@ -364,8 +364,7 @@ size_t hier_bytes(const hier_state *s)
 {
     size_t b = s->cap_nodes * (sizeof(hier_node) + ((s->Y ? 4 : 3) * s->nb + 1) * sizeof(double));
     if (s->Y)
-        b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit) +
-             (s->clustering ? s->ncl * s->nb * sizeof(double) : 0);
+        b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit);
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
     if (s->clustering)
