@@ -111,8 +111,8 @@ static const rp_option_spec hier_options[] = {
     {"importance", "camera|surfaces|none|auto",
      "weigh the refinement by importance (Smits, Arvo & Salesin 1992): camera: what the image sees, "
      "surfaces: uniform over the faces that reflect, none: off (the BF oracle alone); auto: camera when "
-     "only an image is wanted (render), else none.  Default none: with camera or surfaces importance the "
-     "averages of clustered meshes come out about 1% darker (not understood yet; docs/design.md)",
+     "only an image is wanted (render), else none.  It weighs the links between elements, not those of "
+     "clusters.  Default none: on the scenes measured it saved no time (docs/design.md)",
      "none"},
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
