@@ -2,15 +2,13 @@
 #include "simplify.h"
 
 #include <math.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-#include "log.h"
 #include <time.h>
 
 #include "cgal/simplify.h"
+#include "log.h"
 
 static double seconds(void)
 {
@@ -139,7 +137,7 @@ rp_status rp_solution_create(const rp_scene *full, double ratio, double toleranc
         }
         if (r > 0) {
             rp_logf(log, log_ctx, "simplify: surface '%s' (%s:%d) kept as it is (%u triangles): %s", surf[k].name,
-                surf[k].file ? surf[k].file : "?", surf[k].line, surf[k].nfaces, msg);
+                    surf[k].file ? surf[k].file : "?", surf[k].line, surf[k].nfaces, msg);
             continue;
         }
         tris[k] = (rp_surface_triangles){simp[k].xyz, simp[k].nvertices, simp[k].tri, simp[k].ntriangles};
@@ -148,10 +146,10 @@ rp_status rp_solution_create(const rp_scene *full, double ratio, double toleranc
         double d = fmax(simp[k].max_distance_in, simp[k].max_distance_out);
         sol->max_distance = fmax(sol->max_distance, d);
         rp_logf(log, log_ctx,
-            "simplify: surface '%s' %u -> %zu triangles; largest distance between the two at their vertices "
-            "%.3g (%.2g%% of the scene's diagonal)%s; %.2f s",
-            surf[k].name, surf[k].nfaces, simp[k].ntriangles, d, diag > 0 ? 100 * d / diag : 0,
-            simp[k].border_edges ? "; border edges kept" : "", seconds() - t0);
+                "simplify: surface '%s' %u -> %zu triangles; largest distance between the two at their vertices "
+                "%.3g (%.2g%% of the scene's diagonal)%s; %.2f s",
+                surf[k].name, surf[k].nfaces, simp[k].ntriangles, d, diag > 0 ? 100 * d / diag : 0,
+                simp[k].border_edges ? "; border edges kept" : "", seconds() - t0);
     }
     size_t dropped = 0;
     if ((st = rp_scene_with_surfaces(full, replace, &sol->scene, &dropped, err)) != RP_OK)

@@ -436,9 +436,8 @@ static int cl_decide(const hier_state *s, const hier_clink *l)
          * --importance surfaces, -0.75% camera, 0.0% without importance;
          * CGAL's elephant in the Cornell box -0.6% and -0.9% against
          * -0.1%).  Judged without it, the bunny reads -0.1% and -0.2%.
-         * What makes a coarse cluster link dark is not known (the sphere
-         * of hier::cluster_on_off_pathtrace reads -1% clustered, 0%
-         * not). */
+         * Why cluster links left coarser than BF asks come out dark is
+         * not known. */
         const double *rho = item_rho(s, l->recv), *B = item_B(s, l->src);
         double e = 0;
         for (size_t b = 0; b < s->nb; b++)

@@ -367,8 +367,8 @@ rp_status hier_importance_direct(hier_state *s, rp_error *err);
 /* After an importance sweep: y_scale (1 / ybar). */
 void hier_importance_finish(hier_state *s);
 /* The oracle's weight of the transfer q <- p through F (max over bands of
- * F (rho_q B_p Y_q + ...) y_scale), for items (nodes or clusters):
- * hier_link.c and hier_cluster.c. */
+ * F (rho_q B_p Y_q + ...) y_scale), for quadtree links (hier_link.c;
+ * cluster links are judged without importance, hier_cluster.c). */
 double hier_importance_error(const hier_state *s, const double *rho_q, const double *Bq, const double *Yq,
                              const double *rho_p, const double *Bp, const double *Yp);
 void hier_importance_free(hier_state *s);
@@ -426,9 +426,6 @@ static inline double hier_extent2(const hier_node *nd)
     return 0.25 * d2 > nd->area ? 0.25 * d2 : nd->area;
 }
 
-/* Counter-based random numbers (a pure function of the key and the
- * dimension), so results do not depend on the thread schedule:
- * splitmix64's finaliser (Steele, Lea & Flood 2014) as the mixer. */
 /* Stores shares w[0..3] (>= 0, adding up to one) in l: each is rounded
  * through the running sum, so none is negative and they add up to
  * HIER_SHARE_ONE exactly. */
@@ -457,6 +454,9 @@ static inline void hier_link_shares(const hier_link *l, double w[4])
     w[3] = (double)rest / HIER_SHARE_ONE;
 }
 
+/* Counter-based random numbers (a pure function of the key and the
+ * dimension), so results do not depend on the thread schedule:
+ * splitmix64's finaliser (Steele, Lea & Flood 2014) as the mixer. */
 static inline uint64_t hier_mix(uint64_t z)
 {
     z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
