@@ -287,6 +287,7 @@ void hier_cluster_free(hier_state *s)
     free(s->cl_ecount);
     free(s->cl_nent);
     free(s->cl_cent);
+    free(s->cl_cvia);
     free(s->cl_nff);
     free(s->cl_nreach);
     free(s->clinks);
@@ -494,20 +495,27 @@ static double pair_kernel(rp_vec3 x, rp_vec3 nx, rp_vec3 y, rp_vec3 ny)
     return w > 0 && isfinite(w) ? w : 0;
 }
 
+/* An entry as drawn, with the source item of its link (via); the pools
+ * keep hier_centry, and via only for the entries clusters share. */
+typedef struct cl_draw {
+    hier_centry e;
+    uint32_t via;
+} cl_draw;
+
 /* Adds F to the entry (recv, src, via) among the last 16 of out[0..*n)
  * (a receiving element's samples often land on one source leaf), or
  * appends it. */
-static void entry_add(hier_centry *out, unsigned *n, uint32_t recv, uint32_t src, uint32_t via, double F)
+static void entry_add(cl_draw *out, unsigned *n, uint32_t recv, uint32_t src, uint32_t via, double F)
 {
     for (unsigned k = *n > 16 ? *n - 16 : 0; k < *n; k++)
-        if (out[k].src == src && out[k].recv == recv && out[k].via == via) {
-            out[k].F = (float)(out[k].F + F);
+        if (out[k].e.src == src && out[k].e.recv == recv && out[k].via == via) {
+            out[k].e.F = (float)(out[k].e.F + F);
             return;
         }
-    out[*n].recv = recv;
-    out[*n].src = src;
+    out[*n].e.recv = recv;
+    out[*n].e.src = src;
+    out[*n].e.F = (float)F;
     out[*n].via = via;
-    out[*n].F = (float)F;
     (*n)++;
 }
 
@@ -546,7 +554,7 @@ static double link_unoccluded(const hier_state *s, uint32_t r, uint32_t src)
  * A_S k / (pi N)), so F_qS B_S = A_S E[k V B(y)] / pi, unbiased, and a
  * node that no open segment joins to a lit part of the source gathers
  * exactly nothing.  Returns the entries written to out (room for N). */
-static unsigned node_entries(const hier_state *s, uint32_t q, uint32_t src, hier_centry *out, double *rays)
+static unsigned node_entries(const hier_state *s, uint32_t q, uint32_t src, cl_draw *out, double *rays)
 {
     const unsigned N = s->cluster_rays;
     const hier_node *nd = &s->nodes[q];
@@ -608,7 +616,7 @@ static unsigned face_samples(const hier_state *s, const hier_cluster *c, uint32_
  * whatever its visibility (Sillion 1995, sec. 3.2; Smits, Arvo & Greenberg
  * 1994 compute each member's own transfer, which this samples). */
 static unsigned face_entries(const hier_state *s, uint32_t c, uint32_t f, const hier_clink *links, const double *pdf,
-                             const double *cdf, unsigned nl, hier_centry *out, double *rays)
+                             const double *cdf, unsigned nl, cl_draw *out, double *rays)
 {
     const unsigned K = face_samples(s, &s->cl[c], f, nl);
     const hier_node *nd = &s->nodes[f];
@@ -720,6 +728,7 @@ static rp_status cluster_sums(hier_state *s, rp_error *err)
 static void prune_entries(hier_state *s, size_t c, const uint64_t *rm, size_t nrm)
 {
     hier_centry *e = s->cl_cent + s->cl_efirst[c];
+    const uint32_t *via = s->cl_cvia + s->cl_efirst[c];
     size_t n = s->cl_ecount[c];
     size_t lo = 0, hi = nrm;
     while (lo < hi) {
@@ -734,7 +743,7 @@ static void prune_entries(hier_state *s, size_t c, const uint64_t *rm, size_t nr
     for (size_t k = 0; k < n; k++) {
         if (e[k].F == 0)
             continue;
-        uint64_t want = ((uint64_t)c << 32) | e[k].via;
+        uint64_t want = ((uint64_t)c << 32) | via[k];
         size_t x = lo, y = hi;
         while (x < y) {
             size_t m = (x + y) / 2;
@@ -762,27 +771,42 @@ static size_t kill_entries(hier_centry *e, size_t n)
     return d;
 }
 
-/* Appends n entries to a pool (*pool, *np used, *cap). */
-static int pool_append(hier_centry **pool, size_t *np, size_t *cap, const hier_centry *e, size_t n)
+/* Appends the n drawn entries d to a pool (*pool, *np used, *cap) and,
+ * when via is given (the pool clusters share), their links' sources to
+ * *via (capacity *capv, kept in step with the pool's). */
+static int pool_append(hier_centry **pool, size_t *np, size_t *cap, uint32_t **via, size_t *capv, const cl_draw *d,
+                       size_t n)
 {
-    if (*np + n > UINT32_MAX || !hier_grow((void **)pool, cap, *np + n + 1, sizeof **pool))
+    if (*np + n > UINT32_MAX || !hier_grow((void **)pool, cap, *np + n + 1, sizeof **pool) ||
+        (via && !hier_grow((void **)via, capv, *np + n + 1, sizeof **via)))
         return 0;
-    if (n)
-        memcpy(*pool + *np, e, n * sizeof **pool);
+    for (size_t k = 0; k < n; k++) {
+        (*pool)[*np + k] = d[k].e;
+        if (via)
+            (*via)[*np + k] = d[k].via;
+    }
     *np += n;
     return 1;
 }
 
-/* Gives a pool's unused storage back beyond a quarter of what it holds. */
-static void pool_trim(hier_centry **pool, size_t n, size_t *cap)
+/* Gives a pool's unused storage back beyond a quarter of what it holds
+ * (and its via array's, if it has one). */
+static void pool_trim(hier_centry **pool, size_t n, size_t *cap, uint32_t **via, size_t *capv)
 {
     size_t want = n + n / 4 + 1024;
-    if (*cap <= want)
-        return;
-    hier_centry *p = realloc(*pool, want * sizeof *p);
-    if (p) {
-        *pool = p;
-        *cap = want;
+    if (*cap > want) {
+        hier_centry *p = realloc(*pool, want * sizeof *p);
+        if (p) {
+            *pool = p;
+            *cap = want;
+        }
+    }
+    if (via && *capv > want) {
+        uint32_t *v = realloc(*via, want * sizeof *v);
+        if (v) {
+            *via = v;
+            *capv = want;
+        }
     }
 }
 
@@ -808,7 +832,7 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl)
         }
         s->ncl_nent = at;
         s->ncl_ndead = 0;
-        pool_trim(&s->cl_nent, s->ncl_nent, &s->cap_cl_nent);
+        pool_trim(&s->cl_nent, s->ncl_nent, &s->cap_cl_nent, NULL, NULL);
     }
     if (4 * s->ncl_cdead > s->ncl_cent) {
         /* Clusters' ranges are not in pool order once some drew again:
@@ -838,8 +862,10 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl)
                 continue;
             uint32_t f = s->cl_efirst[c], n = s->cl_ecount[c], m = 0;
             for (uint32_t j = 0; j < n; j++)
-                if (s->cl_cent[f + j].F != 0)
+                if (s->cl_cent[f + j].F != 0) {
+                    s->cl_cvia[at + m] = s->cl_cvia[f + j];
                     s->cl_cent[at + m++] = s->cl_cent[f + j];
+                }
             s->cl_efirst[c] = (uint32_t)at;
             s->cl_ecount[c] = m;
             at += m;
@@ -849,7 +875,7 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl)
         free(ord);
         s->ncl_cent = at;
         s->ncl_cdead = 0;
-        pool_trim(&s->cl_cent, s->ncl_cent, &s->cap_cl_cent);
+        pool_trim(&s->cl_cent, s->ncl_cent, &s->cap_cl_cent, &s->cl_cvia, &s->cap_cl_cvia);
     }
 }
 
@@ -867,7 +893,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
 {
     rp_status st = RP_OK;
     const unsigned N = s->cluster_rays;
-    hier_centry *tmp = NULL;
+    cl_draw *tmp = NULL;
     size_t captmp = 0;
     uint32_t *cnt = NULL, *lstart = NULL, *tasks = NULL, *fill = NULL, *idx = NULL;
     size_t capcnt = 0, captask = 0, capidx = 0;
@@ -906,7 +932,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
             l->first = (uint32_t)s->ncl_nent;
             l->count = cnt[i];
             l->Fu = 0;
-            if (!pool_append(&s->cl_nent, &s->ncl_nent, &s->cap_cl_nent, tmp + i * N, cnt[i]))
+            if (!pool_append(&s->cl_nent, &s->ncl_nent, &s->cap_cl_nent, NULL, NULL, tmp + i * N, cnt[i]))
                 goto nomem;
         }
         k0 = k1;
@@ -988,7 +1014,8 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
                 continue;
             s->cl_efirst[c] = (uint32_t)s->ncl_cent;
             for (; t < ntask && tasks[2 * t] == c; t++)
-                if (!pool_append(&s->cl_cent, &s->ncl_cent, &s->cap_cl_cent, tmp + toff[t], cnt[t]))
+                if (!pool_append(&s->cl_cent, &s->ncl_cent, &s->cap_cl_cent, &s->cl_cvia, &s->cap_cl_cvia,
+                                 tmp + toff[t], cnt[t]))
                     goto nomem;
             s->cl_ecount[c] = (uint32_t)(s->ncl_cent - s->cl_efirst[c]);
         }

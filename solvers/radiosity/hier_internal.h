@@ -135,7 +135,6 @@ typedef struct hier_clink {
  * from recv reached. */
 typedef struct hier_centry {
     uint32_t recv, src;
-    uint32_t via;      /* the source item of the link it was drawn for */
     float F;
 } hier_centry;
 
@@ -234,6 +233,10 @@ typedef struct hier_state {
     uint32_t *cl_efirst, *cl_ecount; /* ncl: each cluster's entries in cl_cent */
     hier_centry *cl_cent; /* entries of the links clusters receive, by cluster */
     size_t ncl_cent, cap_cl_cent, ncl_cdead;
+    uint32_t *cl_cvia;    /* for each of cl_cent: the source item of the link
+                             it was drawn for (prune_entries; the entries of
+                             a link a node receives need none) */
+    size_t cap_cl_cvia;
     hier_centry *cl_nent; /* entries of the links quadtree nodes receive, by link */
     size_t ncl_nent, cap_cl_nent, ncl_ndead; /* (dead entries have F = 0) */
     double *cl_nff;      /* per node (cl_nn of them): form factors of the
