@@ -490,7 +490,7 @@ static const rp_experiment experiments[] = {
      .scenes = "scenes/cornell.scene and scenes/real/CornellBox-Original.obj (boxes on the floor: contact shadows)",
      .claim = "at the same element count asked, Gauss-Seidel on a discontinuity mesh (elements following contact "
               "lines and shadow boundaries) has a lower surface error than on a uniform mesh (hierarchical radiosity, "
-              "from the faces and from their discontinuity mesh, runs 4 s, or 20 s in full, whatever --budget says)",
+              "from the faces and from their discontinuity mesh, runs 2 s, or 20 s in full, whatever --budget says)",
      .quick = {60.0, 0, 256, NULL},
      .full = {300.0, 0, 2048, NULL},
      .own_units = 1,

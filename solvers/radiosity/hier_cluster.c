@@ -789,25 +789,27 @@ static int pool_append(hier_centry **pool, size_t *np, size_t *cap, uint32_t **v
     return 1;
 }
 
+/* Shrinks array *a (capacity *cap, items of size bytes) to want items if
+ * it holds more; left as it is if realloc fails. */
+static void trim_to(void **a, size_t *cap, size_t want, size_t size)
+{
+    if (*cap <= want)
+        return;
+    void *p = realloc(*a, want * size);
+    if (p) {
+        *a = p;
+        *cap = want;
+    }
+}
+
 /* Gives a pool's unused storage back beyond a quarter of what it holds
  * (and its via array's, if it has one). */
 static void pool_trim(hier_centry **pool, size_t n, size_t *cap, uint32_t **via, size_t *capv)
 {
     size_t want = n + n / 4 + 1024;
-    if (*cap > want) {
-        hier_centry *p = realloc(*pool, want * sizeof *p);
-        if (p) {
-            *pool = p;
-            *cap = want;
-        }
-    }
-    if (via && *capv > want) {
-        uint32_t *v = realloc(*via, want * sizeof *v);
-        if (v) {
-            *via = v;
-            *capv = want;
-        }
-    }
+    trim_to((void **)pool, cap, want, sizeof **pool);
+    if (via)
+        trim_to((void **)via, capv, want, sizeof **via);
 }
 
 /* Pools hold dead entries (F = 0) where links went or clusters drew
