@@ -61,6 +61,7 @@
 
 #include <gsl/gsl_errno.h>
 #include <gsl/gsl_fit.h>
+#include <gsl/gsl_integration.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -482,6 +483,107 @@ Test(hier, gouraud_vertices_are_point_values, .init = hsetup)
         cr_assert_gt(fabs(leaf - want), 0.2 * want, "the leaf mean is close: the test would prove nothing");
     }
     hier_vertices_destroy(hv);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
+/* --basis linear against the closed form.  A unit-square receiver (rho
+ * 1/2) under a parallel unit-square emitter (Le 3) at height 0.4, refined
+ * to 4 x 4 leaves (bf-epsilon 0, min-area 0.02 of the two squares' area):
+ * one bounce is the whole answer, B(x) = rho pi Le F(x), F the point-to-
+ * rectangle form factor (Howell's B-3 by superposition).  On every leaf
+ * the best any linear function can do is the L2 projection of B onto the
+ * leaf's linear functions, computed here by 8 x 8-point Gauss-Legendre
+ * (GSL); the best constant, B's mean there.  The linear solution must come
+ * within 10% of the best linear error and be several times better than the
+ * constant basis's solution on the same leaves. */
+static void linear_plate_errors(const char *basis, double *err, double *best_const, double *best_lin)
+{
+    const double c = 0.4, rho = 0.5, Le = 3;
+    char text[512];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial floor reflect 0.5\nmaterial lamp reflect 0 emit 3\n"
+             "quad receiver floor  0 0 0  1 0 0  1 1 0  0 1 0\n"
+             "quad emitter lamp  0 0 %g  0 1 %g  1 1 %g  1 0 %g\n",
+             c, c, c, c);
+    rp_scene *scene = rp_test_parse(text);
+    hrun r;
+    const char *kv[] = {"bf-epsilon", "0", "min-area", "0.02", "basis", basis, NULL};
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    cr_assert_eq(rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0), 17, "4 x 4 receiver leaves and the lamp");
+    gsl_integration_glfixed_table *t = gsl_integration_glfixed_table_alloc(8);
+    cr_assert(t);
+    double e2 = 0, bc2 = 0, bl2 = 0;
+    for (int i = 0; i < 4; i++)
+        for (int j = 0; j < 4; j++) {
+            const double x0 = i / 4.0, y0 = j / 4.0, h = 0.25;
+            /* moments of B over the leaf: mean, and against the leaf's
+             * orthonormal linear functions sqrt(3) (2u - 1), sqrt(3) (2v - 1) */
+            double m = 0, m2 = 0, cu = 0, cv = 0, se = 0;
+            for (size_t a = 0; a < t->n; a++)
+                for (size_t b = 0; b < t->n; b++) {
+                    double x, wx, y, wy;
+                    gsl_integration_glfixed_point(x0, x0 + h, a, &x, &wx, t);
+                    gsl_integration_glfixed_point(y0, y0 + h, b, &y, &wy, t);
+                    double w = wx * wy / (h * h);
+                    double B = rho * RP_PI * Le * rp_cf_point_rect(x, y, 1, 1, c);
+                    double got;
+                    rp_hierarchical_radiosity_at(r.state, 0, rp_v3(x, y, 0), &got);
+                    m += w * B;
+                    m2 += w * B * B;
+                    cu += w * B * sqrt(3.0) * (2 * (x - x0) / h - 1);
+                    cv += w * B * sqrt(3.0) * (2 * (y - y0) / h - 1);
+                    se += w * (got - B) * (got - B);
+                }
+            e2 += se / 16;
+            bc2 += (m2 - m * m) / 16;
+            bl2 += (m2 - m * m - cu * cu - cv * cv) / 16;
+        }
+    gsl_integration_glfixed_table_free(t);
+    *err = sqrt(e2);
+    *best_const = sqrt(bc2);
+    *best_lin = sqrt(fmax(bl2, 0));
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
+Test(hier, linear_basis_against_closed_form, .init = hsetup)
+{
+    double ec, el, bc, bl;
+    linear_plate_errors("constant", &ec, &bc, &bl);
+    linear_plate_errors("linear", &el, &bc, &bl);
+    cr_log_info("plate under a lamp, 4 x 4 leaves, RMS error of B: constant basis %.5f (best constant %.5f), "
+                "linear basis %.5f (best linear %.5f)",
+                ec, bc, el, bl);
+    cr_assert_lt(bl, 0.5 * bc, "B is nearly constant over a leaf: the test would prove nothing");
+    cr_assert_lt(el, 1.1 * bl, "linear: %.5f against the best linear %.5f", el, bl);
+    cr_assert_lt(el, 0.5 * ec, "linear %.5f, constant %.5f", el, ec);
+}
+
+/* The furnace with --basis linear: every leaf's mean is still
+ * Le / (1 - rho) = 2, and the linear functions on it carry nothing (the
+ * radiosity is uniform): at every leaf corner |L - 2| is small. */
+Test(hier, linear_basis_furnace, .init = hsetup, .timeout = 120)
+{
+    const char *kv[] = {"bf-epsilon", "0.05", "tolerance", "1e-12", "basis", "linear", NULL};
+    furnace_check(kv, 1e-6, 50);
+    rp_scene *scene = rp_test_load("scenes/furnace.scene");
+    hrun r;
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    const hier_state *s = r.state;
+    double worst = 0;
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        if (nd->child != RP_NONE)
+            continue;
+        for (int k = 0; k < nd->nverts; k++) {
+            double B[HIER_MAX_BANDS];
+            rp_hierarchical_radiosity_at(s, nd->face, rp_v3_madd(nd->v[k], rp_v3_sub(nd->c, nd->v[k]), 1e-6), B);
+            worst = fmax(worst, fabs(B[0] / RP_PI - 2));
+        }
+    }
+    cr_log_info("furnace, --basis linear: largest |L - 2| at a leaf corner %.3g", worst);
+    cr_assert_lt(worst, 1e-3);
     hrun_end(&r);
     rp_scene_destroy(scene);
 }

@@ -567,13 +567,17 @@ typedef struct img_job {
     double *vtx;            /* --simplify: the solution at the full mesh's vertices */
 } img_job;
 
-/* B at point p of solution face `face`: the leaf's own value. */
+/* B at point p of solution face `face`: the leaf's own value (with
+ * --basis linear its linear function at p). */
 static void eval_flat(const void *ctx, uint32_t face, rp_vec3 p, double *B)
 {
     const hier_state *s = ((const img_job *)ctx)->s;
     double w[4];
     uint32_t leaf = hier_locate(s, face, p, w);
-    memcpy(B, s->B + (size_t)leaf * s->nb, s->nb * sizeof *B);
+    if (s->linear)
+        hier_linear_eval(s, leaf, p, B);
+    else
+        memcpy(B, s->B + (size_t)leaf * s->nb, s->nb * sizeof *B);
 }
 
 /* B there interpolated from the leaves' corners. */

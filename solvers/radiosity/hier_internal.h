@@ -57,8 +57,10 @@ enum {
                                      until the oracle decides not to refine
                                      it, unless the value's rays found it
                                      visible (hier_link_eval) */
-    HIER_LINK_SHARES = 1u << 4    /* share[] holds the source's children's
+    HIER_LINK_SHARES = 1u << 4,   /* share[] holds the source's children's
                                      shares (hierarchical.c, source_value) */
+    HIER_LINK_COEF = 1u << 5      /* --basis linear: share[0], share[1] hold
+                                     the link's slot in lin_K (hier_linear.c) */
 };
 
 /* A link's shares of its source's four children are kept in 16 bits as
@@ -81,6 +83,16 @@ typedef struct hier_link {
                           HIER_LINK_SHARES; child 3 has the rest */
     uint16_t flags;
 } hier_link;
+
+/* --basis linear (hier_linear.c): a node's linear basis functions
+ * phi_k(x) = dot(g[k], x - c), k = 0, 1, orthonormal with the constant
+ * over the node (the mean of phi_j phi_k over its area is delta_jk, that
+ * of phi_k zero), and their dual vectors in the face's plane
+ * (dot(g[j], h[k]) = delta_jk, so x - c = sum_k phi_k(x) h[k]). */
+typedef struct hier_basis {
+    rp_vec3 c;
+    rp_vec3 g[2], h[2];
+} hier_basis;
 
 /* What is fixed per scene face. */
 typedef struct hier_face {
@@ -203,6 +215,8 @@ typedef struct hier_state {
      * ancestors' links), 1 elsewhere. */
     int enclosure;
     double *ff_scale;
+    double *ff_lin;      /* --basis linear: nnodes x 2, the linear part of
+                            each node's row sum times ff_scale (update_scale) */
     size_t cap_scale;
 
     hier_link *links;    /* sorted by receiver after every refinement pass */
@@ -250,6 +264,17 @@ typedef struct hier_state {
     unsigned cluster_rays;
     unsigned cluster_face_rays; /* samples per face of a receiving cluster */
     double cl_area_rel, cl_area; /* power-error area scale (relative, absolute) */
+
+    /* --basis linear (hier_linear.c); all NULL / 0 with the constant basis.
+     * B, Bg and Bd above keep the constant coefficients (the area means),
+     * so surface averages, clusters, importance and the oracle read them
+     * unchanged; the linear ones are kept beside them. */
+    int linear;
+    hier_basis *basis;   /* nnodes */
+    double *B1, *Bg1, *Bd1; /* nnodes x nb x 2: the coefficients of phi_0, phi_1 */
+    float *lin_K;        /* 8 per slot: a link's coupling coefficients but
+                            the constant-to-constant one, which is F */
+    size_t nlin_K, cap_lin_K;
 
     /* Importance (hier_importance.c); all NULL / 0 with --importance none. */
     hier_importance importance;
@@ -317,6 +342,9 @@ uint32_t hier_locate(const hier_state *s, uint32_t f, rp_vec3 p, double w[4]);
 /* Centroids and areas of the four children node i would get, without
  * creating them. */
 void hier_child_centroids(const hier_node *nd, rp_vec3 c[4], double area[4]);
+/* The corners, centroids, areas and face of the four children node nd
+ * would get (the rest of out is not set), without creating them. */
+void hier_child_shapes(const hier_node *nd, hier_node out[4]);
 /* Memory the nodes, radiosities and links hold. */
 size_t hier_bytes(const hier_state *s);
 
@@ -359,6 +387,37 @@ void hier_cluster_free(hier_state *s);
  * touch (always split), -1 when nothing can pass between them.  For the
  * tests. */
 double hier_cluster_bound(const hier_state *s, uint32_t recv, uint32_t src);
+
+/* ---- hier_linear.c ---- */
+
+/* The basis of a node (its corners, centroid, area and face normal n set). */
+void hier_basis_of(const hier_node *nd, rp_vec3 n, hier_basis *out);
+/* Gives every link without one its coupling coefficients (after each
+ * refinement pass), compacting lin_K when most of it is dead. */
+rp_status hier_linear_links(hier_state *s, rp_error *err);
+/* Link k's coefficients K[i][j] (i receiver, j source; 0 the constant,
+ * 1-2 phi_0, phi_1), K[0][0] = its F. */
+void hier_linear_coef(const hier_state *s, const hier_link *l, double K[3][3]);
+/* The two-scale relation of child node c with its parent p: on c,
+ * phi^p_i = a[i] + sum_k A[i][k] phi^c_k. */
+void hier_linear_relation(const hier_state *s, uint32_t p, uint32_t c, double a[2], double A[2][2]);
+/* Receiver q's gathered sums over its links, before rho: acc[b] for the
+ * constant, acc1[2 b + k] for phi_k. */
+void hier_linear_gather(const hier_state *s, uint32_t q, double *acc, double *acc1);
+/* Push: node i's children's Bd and Bd1 from i's Bd1 + Bg1 (their Bd must
+ * already hold i's Bd + Bg). */
+void hier_linear_push(hier_state *s, uint32_t i);
+/* Pull: node i's B1 from its children's, weighted as its B (by W, or by
+ * area where W is all zero); i's B must be set. */
+void hier_linear_pull(hier_state *s, uint32_t i, const double *W);
+/* The form factors reaching each node through its own links and its
+ * ancestors' as a linear function on it, S0[i] + S1[2 i .. 2 i + 1] . phi
+ * (chain_sums of hierarchical.c with the ancestors' linear parts pushed
+ * down; exactly 1 everywhere in an enclosure). */
+void hier_linear_chain_sums(const hier_state *s, double *S0, double *S1);
+/* Radiosity at point x of leaf i: B + B1 . phi(x) (nb bands). */
+void hier_linear_eval(const hier_state *s, uint32_t i, rp_vec3 x, double *out);
+void hier_linear_free(hier_state *s);
 
 /* ---- hier_importance.c ---- */
 
@@ -445,6 +504,16 @@ static inline void hier_link_set_shares(hier_link *l, const double w[4])
     }
     l->flags |= HIER_LINK_SHARES;
 }
+
+/* --basis linear: link l's slot in lin_K, kept in share[0..1]. */
+static inline void hier_link_set_slot(hier_link *l, uint32_t slot)
+{
+    l->share[0] = (uint16_t)(slot & 0xffffu);
+    l->share[1] = (uint16_t)(slot >> 16);
+    l->flags |= HIER_LINK_COEF;
+}
+
+static inline uint32_t hier_link_slot(const hier_link *l) { return (uint32_t)l->share[0] | ((uint32_t)l->share[1] << 16); }
 
 /* The four shares of l as fractions (adding up to one). */
 static inline void hier_link_shares(const hier_link *l, double w[4])

@@ -69,6 +69,19 @@ static rp_status grow_nodes(hier_state *s, size_t need, rp_error *err)
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
         s->Y = y;
     }
+    if (s->linear) {
+        hier_basis *bs = realloc(s->basis, cap * sizeof *bs);
+        if (!bs)
+            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
+        s->basis = bs;
+        double **lin[3] = {&s->B1, &s->Bg1, &s->Bd1};
+        for (int k = 0; k < 3; k++) {
+            double *a = realloc(*lin[k], cap * s->nb * 2 * sizeof *a);
+            if (!a)
+                return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
+            *lin[k] = a;
+        }
+    }
     double *w = realloc(s->W, cap * sizeof *w);
     if (!w)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
@@ -104,6 +117,12 @@ rp_status hier_nodes_init(hier_state *s, rp_error *err)
             s->Bg[f * s->nb + b] = 0;
             s->Bd[f * s->nb + b] = 0;
         }
+        if (s->linear) {
+            hier_basis_of(nd, s->faces[f].n, &s->basis[f]);
+            memset(s->B1 + f * s->nb * 2, 0, s->nb * 2 * sizeof *s->B1);
+            memset(s->Bg1 + f * s->nb * 2, 0, s->nb * 2 * sizeof *s->Bg1);
+            memset(s->Bd1 + f * s->nb * 2, 0, s->nb * 2 * sizeof *s->Bd1);
+        }
     }
     s->nnodes = s->nfaces;
     return RP_OK;
@@ -133,6 +152,18 @@ static void child_corners(const hier_node *p, rp_vec3 cv[4][4])
      * (u0, v0) = (0,0), (1/2,0), (1/2,1/2), (0,1/2). */
     rp_vec3 q[4][4] = {{c0, m01, ctr, m30}, {m01, c1, m12, ctr}, {ctr, m12, c2, m23}, {m30, ctr, m23, c3}};
     memcpy(cv, q, sizeof q);
+}
+
+void hier_child_shapes(const hier_node *nd, hier_node out[4])
+{
+    rp_vec3 cv[4][4];
+    child_corners(nd, cv);
+    for (int k = 0; k < 4; k++) {
+        memcpy(out[k].v, cv[k], sizeof out[k].v);
+        out[k].nverts = nd->nverts;
+        out[k].face = nd->face;
+        node_measure(&out[k]);
+    }
 }
 
 void hier_child_centroids(const hier_node *nd, rp_vec3 c[4], double area[4])
@@ -187,6 +218,22 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err)
     }
     p->child = first;
     s->nnodes += 4;
+    if (s->linear)
+        /* The parent's linear function restricted to each child. */
+        for (uint32_t c = first; c < first + 4; c++) {
+            hier_basis_of(&s->nodes[c], s->faces[s->nodes[c].face].n, &s->basis[c]);
+            double a[2], A[2][2];
+            hier_linear_relation(s, i, c, a, A);
+            for (size_t b = 0; b < nb; b++) {
+                const double *L = s->B1 + ((size_t)i * nb + b) * 2;
+                double *B1 = s->B1 + ((size_t)c * nb + b) * 2;
+                s->B[(size_t)c * nb + b] += a[0] * L[0] + a[1] * L[1];
+                B1[0] = A[0][0] * L[0] + A[1][0] * L[1];
+                B1[1] = A[0][1] * L[0] + A[1][1] * L[1];
+                s->Bg1[((size_t)c * nb + b) * 2] = s->Bg1[((size_t)c * nb + b) * 2 + 1] = 0;
+                s->Bd1[((size_t)c * nb + b) * 2] = s->Bd1[((size_t)c * nb + b) * 2 + 1] = 0;
+            }
+        }
     return RP_OK;
 }
 
@@ -367,6 +414,8 @@ size_t hier_bytes(const hier_state *s)
         b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit);
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
+    if (s->linear)
+        b += s->cap_nodes * (sizeof(hier_basis) + 6 * s->nb * sizeof(double)) + s->cap_lin_K * 8 * sizeof(float);
     if (s->clustering)
         b += s->ncl * (sizeof(hier_cluster) + 2 * s->nb * sizeof(double) + 2 * sizeof(uint32_t)) +
              s->nfaces * (3 * sizeof(uint32_t) + sizeof(double)) + s->cl_nn * (sizeof(double) + 1) +

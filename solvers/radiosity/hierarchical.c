@@ -114,6 +114,10 @@ static const rp_option_spec hier_options[] = {
      "only an image is wanted (render), else none.  It weighs the links between elements, not those of "
      "clusters.  Default none: on the scenes measured it saved no time (docs/design.md)",
      "none"},
+    {"basis", "constant|linear",
+     "the functions radiosity is expanded in on each element: its area mean, or a linear function "
+     "(Galerkin, Zatz 1993; three coefficients per band, nine coupling coefficients per link)",
+     "constant"},
     {"reconstruct", "flat|gouraud|gather",
      "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
     {"vertex-rays", "N",
@@ -247,6 +251,7 @@ static void hier_fini(void *state)
     free(s->Bd);
     free(s->W);
     free(s->ff_scale);
+    free(s->ff_lin);
     free(s->links);
     free(s->spare);
     free(s->link_start);
@@ -255,6 +260,7 @@ static void hier_fini(void *state)
     free(s->cand);
     hier_importance_free(s);
     hier_cluster_free(s);
+    hier_linear_free(s);
     memset(s, 0, sizeof *s);
 }
 
@@ -342,9 +348,30 @@ static rp_status update_scale(hier_state *s, rp_error *err)
         if (!a)
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for row sums");
         s->ff_scale = a;
+        if (s->linear) {
+            double *l = realloc(s->ff_lin, 2 * s->cap_nodes * sizeof *l);
+            if (!l)
+                return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for row sums");
+            s->ff_lin = l;
+        }
         s->cap_scale = s->cap_nodes;
     }
     double *sum = s->ff_scale;
+    if (s->linear) {
+        /* --basis linear: the row sum is a linear function S0 + S1 . phi
+         * over each leaf (the ancestors' links' slopes pushed down), and
+         * the leaf's gathered G0 + G1 . phi is divided by it to first
+         * order: G0 / S0 + (G1 - (G0 / S0) S1) / S0 . phi (hier_sweep),
+         * so a uniform enclosure gets no slope at all. */
+        hier_linear_chain_sums(s, sum, s->ff_lin);
+        for (size_t i = 0; i < s->nnodes; i++) {
+            double inv = sum[i] > 0 ? 1.0 / sum[i] : 1.0;
+            s->ff_lin[2 * i] *= sum[i] > 0 ? inv : 0;
+            s->ff_lin[2 * i + 1] *= sum[i] > 0 ? inv : 0;
+            sum[i] = inv;
+        }
+        return RP_OK;
+    }
     chain_sums(s, sum);
     for (size_t i = 0; i < s->nnodes; i++)
         sum[i] = sum[i] > 0 ? 1.0 / sum[i] : 1.0;
@@ -438,6 +465,10 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     s->gather_rays = (unsigned)gr;
     s->vertex_rays = (unsigned)vr;
     s->contact_levels = (unsigned)cl;
+    const char *bm = rp_options_word(o, "basis");
+    if (bm && strcmp(bm, "constant") != 0 && strcmp(bm, "linear") != 0)
+        return rp_error_set(err, RP_ERR_INPUT, "hierarchical: --basis: '%s' is not constant or linear", bm);
+    s->linear = bm && strcmp(bm, "linear") == 0;
     const char *rm = rp_options_word(o, "reconstruct");
     if (rm) {
         if (strcmp(rm, "flat") == 0)
@@ -585,7 +616,9 @@ void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, 
 static void source_value(const hier_state *s, hier_link *l, const double *X, double *out)
 {
     const hier_node *p = &s->nodes[l->src];
-    if (p->child != RP_NONE && !(l->flags & HIER_LINK_SHARES)) {
+    /* --basis linear: the source's own linear function carries what the
+     * shares would (hier_linear.c), and share[] holds the link's slot. */
+    if (p->child != RP_NONE && !(l->flags & (HIER_LINK_SHARES | HIER_LINK_COEF)) && !s->linear) {
         const hier_node *q = &s->nodes[l->recv];
         rp_vec3 n = s->faces[q->face].n, np = s->faces[p->face].n;
         double w[4], ws = 0;
@@ -650,6 +683,17 @@ static double hier_sweep(hier_state *s)
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256)
     for (long qi = 0; qi < (long)nn; qi++) {
         double acc[HIER_MAX_BANDS];
+        const double *rho = s->faces[s->nodes[qi].face].rho;
+        if (s->linear) {
+            double acc1[2 * HIER_MAX_BANDS];
+            hier_linear_gather(s, (uint32_t)qi, acc, acc1);
+            for (size_t b = 0; b < nb; b++) {
+                Bg[(size_t)qi * nb + b] = rho[b] * acc[b];
+                s->Bg1[((size_t)qi * nb + b) * 2] = rho[b] * acc1[2 * b];
+                s->Bg1[((size_t)qi * nb + b) * 2 + 1] = rho[b] * acc1[2 * b + 1];
+            }
+            continue;
+        }
         for (size_t b = 0; b < nb; b++)
             acc[b] = 0;
         for (uint32_t k = start[qi]; k < start[qi + 1]; k++) {
@@ -659,7 +703,6 @@ static double hier_sweep(hier_state *s)
             for (size_t b = 0; b < nb; b++)
                 acc[b] += F * Bp[b];
         }
-        const double *rho = s->faces[s->nodes[qi].face].rho;
         for (size_t b = 0; b < nb; b++)
             Bg[(size_t)qi * nb + b] = rho[b] * acc[b];
     }
@@ -674,6 +717,8 @@ static double hier_sweep(hier_state *s)
         if (nd->parent == RP_NONE) {
             for (size_t b = 0; b < nb; b++)
                 Bd[i * nb + b] = 0;
+            if (s->linear)
+                memset(s->Bd1 + i * nb * 2, 0, nb * 2 * sizeof *s->Bd1);
         } else
             reached |= W[nd->parent] > 0;
         W[i] = reached;
@@ -682,6 +727,8 @@ static double hier_sweep(hier_state *s)
         for (uint32_t c = nd->child; c < nd->child + 4; c++)
             for (size_t b = 0; b < nb; b++)
                 Bd[(size_t)c * nb + b] = Bd[i * nb + b] + Bg[i * nb + b];
+        if (s->linear)
+            hier_linear_push(s, (uint32_t)i);
     }
     /* Pull: leaves get E + everything gathered on the way down; parents
      * the weighted mean of their children.  A leaf no link reaches sees
@@ -706,10 +753,21 @@ static double hier_sweep(hier_state *s)
                 Bi[b] = v;
                 emits |= Le[b] > 0;
             }
+            if (s->linear)
+                for (size_t b = 0; b < nb; b++)
+                    for (int k = 0; k < 2; k++) {
+                        /* (G1 - (G0 / S0) S1) / S0, ff_lin = S1 / S0 (update_scale) */
+                        size_t at = (i * nb + b) * 2 + (size_t)k;
+                        double g0 = scale * (Bg[i * nb + b] + Bd[i * nb + b]);
+                        double slope = s->enclosure ? s->ff_lin[2 * i + (size_t)k] : 0;
+                        s->B1[at] = scale * (s->Bg1[at] + s->Bd1[at]) - g0 * slope;
+                    }
             W[i] = (W[i] > 0 || emits) ? nd->area : 0;
             continue;
         }
         W[i] = pull_children(s, nd, W, B, Bi);
+        if (s->linear)
+            hier_linear_pull(s, (uint32_t)i, W);
     }
     double r = 0;
     for (size_t b = 0; b < nb; b++)
@@ -840,6 +898,8 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
     if ((st = hier_refine(s, &refined, err)) != RP_OK)
         return st;
     refined += crefined;
+    if (s->linear && (st = hier_linear_links(s, err)) != RP_OK)
+        return st;
     if ((st = update_scale(s, err)) != RP_OK)
         return st;
     if (s->importance != HIER_IMP_NONE) {
@@ -931,6 +991,17 @@ size_t rp_hierarchical_leaves(const void *state, double *area, uint32_t *surface
         n++;
     }
     return n;
+}
+
+void rp_hierarchical_radiosity_at(const void *state, uint32_t face, rp_vec3 p, double *B)
+{
+    const hier_state *s = state;
+    double w[4];
+    uint32_t leaf = hier_locate(s, face, p, w);
+    if (s->linear)
+        hier_linear_eval(s, leaf, p, B);
+    else
+        memcpy(B, s->B + (size_t)leaf * s->nb, s->nb * sizeof *B);
 }
 
 size_t rp_hierarchical_leaf_form_factor_sums(const void *state, double *sums, size_t cap)

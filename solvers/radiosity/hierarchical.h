@@ -53,6 +53,12 @@ void rp_hierarchical_stats(const void *state, rp_hier_stats *out);
 size_t rp_hierarchical_leaves(const void *state, double *area, uint32_t *surface, double *B,
                               size_t cap);
 
+/* The radiosity (nbands values, W m^-2) the solution holds at point p of
+ * scene face `face` (of the scene solved on: with --simplify or --mesh
+ * discontinuity not the scene given): the value of the leaf containing p,
+ * or with --basis linear its linear function at p. */
+void rp_hierarchical_radiosity_at(const void *state, uint32_t face, rp_vec3 p, double *B);
+
 /* The sum of the form factors that reach a leaf through the links of the
  * leaf and of its ancestors (pushed down by push-pull), per leaf in the
  * order of rp_hierarchical_leaves; returns the leaf count.  In a closed
