@@ -486,11 +486,13 @@ static const rp_experiment experiments[] = {
      .run = rp_exp_meshing},
     {.name = "discontinuity",
      .summary = "uniform and discontinuity meshes (and hierarchical refinement from the faces and from their "
-                "discontinuity mesh): error against elements and time, meshes drawn",
+                "discontinuity mesh, with constant and linear bases): error against elements and time, meshes drawn",
      .scenes = "scenes/cornell.scene and scenes/real/CornellBox-Original.obj (boxes on the floor: contact shadows)",
      .claim = "at the same element count asked, Gauss-Seidel on a discontinuity mesh (elements following contact "
               "lines and shadow boundaries) has a lower surface error than on a uniform mesh (hierarchical radiosity, "
-              "from the faces and from their discontinuity mesh, runs 2 s, or 20 s in full, whatever --budget says)",
+              "from the faces and from their discontinuity mesh, with constant and linear bases, runs 2 s, or 20 s "
+              "in full, whatever --budget says; the report also says whether the linear basis beats the constant "
+              "one from the discontinuity mesh)",
      .quick = {60.0, 0, 256, NULL},
      .full = {300.0, 0, 2048, NULL},
      .own_units = 1,
