@@ -9,7 +9,8 @@
  * filter, stratified jitter that is a pure function of (seed, pixel,
  * sample).  A ray hitting the front of a face sees L = B / pi, with B
  *
- *   flat     the leaf's own value;
+ *   flat     the leaf's own value (--basis linear: its linear function
+ *            at the point);
  *   gouraud  interpolated from values at the leaves' corners (Cohen &
  *            Wallace 1993, sec. 9.2): at an ordinary vertex the radiosity
  *            at that point, gathered through the links of the leaves around
@@ -20,7 +21,8 @@
  *            leaf) the value is anchored, i.e. interpolated along that
  *            coarser edge (Baum, Mann, Smith & Winget 1991), so both sides
  *            of the edge interpolate the same line and the image has no
- *            shading cracks;
+ *            shading cracks (--basis linear: the area-weighted mean of
+ *            the leaves' linear functions at an ordinary vertex);
  *   gather   one bounce of final gathering (Reichert 1992; the uniform
  *            solvers' rp_recon_final_gather): L = Le + rho/pi E(x), the
  *            irradiance from the area lights sampled directly and from
@@ -439,6 +441,16 @@ static int vtx_point_values(const hier_state *s, hier_vertices *hv, size_t nleav
                     xi = nx < 32 ? nx++ : 31; /* (a vertex of more than 32 faces re-uses the last) */
                     xface[xi] = lf->face;
                     xs[xi] = rp_v3_madd(t->p[v], rp_v3_sub(lf->c, t->p[v]), 1e-3);
+                }
+                if (s->linear) {
+                    /* --basis linear: the leaf's own linear function
+                     * there; the vertex takes the area-weighted mean of
+                     * its leaves' (the point gather below corrects
+                     * constant leaves, and counted the slopes twice) */
+                    hier_linear_eval(s, i, xs[xi], val);
+                    for (size_t b = 0; b < nb; b++)
+                        acc[b] += lf->area * val[b];
+                    continue;
                 }
                 double dF = 0;
                 for (size_t b = 0; b < nb; b++)

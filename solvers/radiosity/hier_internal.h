@@ -415,6 +415,11 @@ void hier_linear_pull(hier_state *s, uint32_t i, const double *W);
  * (chain_sums of hierarchical.c with the ancestors' linear parts pushed
  * down; exactly 1 everywhere in an enclosure). */
 void hier_linear_chain_sums(const hier_state *s, double *S0, double *S1);
+/* --basis linear: the unoccluded form factor of link q <- p by the rule
+ * over q of the coupling coefficients (exact where the kernel is quadratic
+ * across q), so that a link's F and its linear coefficients are one
+ * integral's. */
+double hier_linear_rule_mean(const hier_state *s, const hier_node *q, const hier_node *p);
 /* Radiosity at point x of leaf i: B + B1 . phi(x) (nb bands). */
 void hier_linear_eval(const hier_state *s, uint32_t i, rp_vec3 x, double *out);
 void hier_linear_free(hier_state *s);

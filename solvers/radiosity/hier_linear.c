@@ -190,6 +190,29 @@ static void link_coefficients(const hier_state *s, const hier_link *l, float out
             for (int j = 0; j < 3; j++)
                 K[i][j] += w[k] * psi_q[i] * col[j];
     }
+    if (src_linear) {
+        /* The quarters' sums give sum_c psi_j(c_c) int_c G = A_p (M g)_j
+         * for a kernel linear across p, g its coefficients, M_jk = sum_c
+         * (A_c / A_p) psi_j(c_c) psi_k(c_c) the quarters' centroids'
+         * moments (3/4 of the identity for a parallelogram or triangle:
+         * the centroids spread less than the points), whereas int_p psi_j G
+         * is A_p g_j: M^-1 takes the one to the other, exact for a linear
+         * kernel. */
+        double M[2][2] = {{0, 0}, {0, 0}};
+        for (int c = 0; c < 4; c++)
+            for (int j = 0; j < 2; j++)
+                for (int k = 0; k < 2; k++)
+                    M[j][k] += psi_p[c][0] * psi_p[c][1 + j] * psi_p[c][1 + k];
+        double det = M[0][0] * M[1][1] - M[0][1] * M[1][0];
+        if (det > 1e-12) {
+            double Mi[2][2] = {{M[1][1] / det, -M[0][1] / det}, {-M[1][0] / det, M[0][0] / det}};
+            for (int i = 0; i < 3; i++) {
+                double a = K[i][1], b = K[i][2];
+                K[i][1] = Mi[0][0] * a + Mi[0][1] * b;
+                K[i][2] = Mi[1][0] * a + Mi[1][1] * b;
+            }
+        }
+    }
     /* The visibility (and the estimate) of the constant basis's F. */
     double v = K[0][0] > 0 ? (double)l->F / K[0][0] : 0;
     for (int m = 1; m < 9; m++)
@@ -353,4 +376,14 @@ void hier_linear_chain_sums(const hier_state *s, double *S0, double *S1)
         S1[2 * i] += A[0][0] * Sp[0] + A[1][0] * Sp[1];
         S1[2 * i + 1] += A[0][1] * Sp[0] + A[1][1] * Sp[1];
     }
+}
+
+double hier_linear_rule_mean(const hier_state *s, const hier_node *q, const hier_node *p)
+{
+    rp_vec3 x[4];
+    double w[4], m = 0;
+    int nx = receiver_rule(q, x, w);
+    for (int k = 0; k < nx; k++)
+        m += w[k] * hier_point_to_node(s, x[k], s->faces[q->face].n, p, HIER_DISK_RATIO);
+    return m;
 }

@@ -119,7 +119,9 @@ static const rp_option_spec hier_options[] = {
      "(Galerkin, Zatz 1993; three coefficients per band, nine coupling coefficients per link)",
      "constant"},
     {"reconstruct", "flat|gouraud|gather",
-     "image: leaf value, crack-free vertex interpolation, or a one-bounce final gather", "gouraud"},
+     "image: leaf value (with --basis linear the leaf's linear function), crack-free vertex interpolation "
+     "(with --basis linear of the leaves' functions at the vertices), or a one-bounce final gather",
+     "gouraud"},
     {"vertex-rays", "N",
      "image with --reconstruct gouraud: visibility rays from each vertex to each partly visible "
      "source it gathers from (rounded to a square, at most 64)",
