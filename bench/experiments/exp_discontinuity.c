@@ -29,6 +29,11 @@
 #define DC_MODES 2
 #define DC_MAXCOUNTS 3
 #define DC_HR 4
+/* The full form's refinement sweep of hierarchical radiosity from the
+ * discontinuity mesh, constant and linear bases (error against time). */
+#define DC_SWEEP 4
+static const double dc_sweep_bf[DC_SWEEP] = {0.1, 0.05, 0.02, 0.01};
+static const char *const dc_basis[2] = {"constant", "linear"};
 
 static const char *const dc_scene_file[DC_SCENES] = {"cornell.scene", "real/CornellBox-Original.obj"};
 static const char *const dc_scene_id[DC_SCENES] = {"cornell", "original"};
@@ -50,6 +55,8 @@ typedef struct dc_scene {
     /* hierarchical radiosity from the faces and from their discontinuity
      * mesh (dc_hr) */
     double hr_rmse[DC_HR], hr_surface_err[DC_HR], hr_seconds[DC_HR];
+    /* the sweep (full form): [basis][bf-epsilon] */
+    double sw_rmse[2][DC_SWEEP], sw_surface_err[2][DC_SWEEP], sw_seconds[2][DC_SWEEP];
 } dc_scene;
 
 static const char *const dc_hr_spec[DC_HR] = {"hierarchical", "hierarchical:mesh=discontinuity",
@@ -155,6 +162,16 @@ static rp_status dc_write(const rp_experiment_params *p, dc_scene *sc, const uns
             }
             fputs("1\n", o.f);
         }
+        for (int b = 0; b < 2 && !p->quick; b++)
+            for (int k = 0; k < DC_SWEEP; k++) {
+                fprintf(o.f, "%s,hierarchical-discontinuity-%s-bf%g,,,", dc_scene_id[s], dc_basis[b], dc_sweep_bf[k]);
+                double v[4] = {NAN, sc[s].sw_rmse[b][k], sc[s].sw_surface_err[b][k], sc[s].sw_seconds[b][k]};
+                for (int i = 0; i < 4; i++) {
+                    rp_exp_fnum(o.f, v[i]);
+                    fputc(',', o.f);
+                }
+                fputs("1\n", o.f);
+            }
     }
     if ((st = rp_out_close(&o, 1, err)) != RP_OK)
         return st;
@@ -186,6 +203,24 @@ static rp_status dc_write(const rp_experiment_params *p, dc_scene *sc, const uns
             fputs("\n\n", o.f);
         }
     }
+    /* the sweep's blocks last (full form): index 12 + 2 s + basis */
+    for (int s = 0; s < DC_SCENES && !p->quick; s++)
+        for (int b = 0; b < 2; b++) {
+            fprintf(o.f, "# %s hierarchical-discontinuity %s, bf-epsilon", dc_scene_id[s], dc_basis[b]);
+            for (int k = 0; k < DC_SWEEP; k++)
+                fprintf(o.f, " %g", dc_sweep_bf[k]);
+            fputc('\n', o.f);
+            for (int k = 0; k < DC_SWEEP; k++) {
+                fputs("? ", o.f);
+                double v[4] = {sc[s].sw_rmse[b][k], sc[s].sw_rmse[b][k], sc[s].sw_surface_err[b][k],
+                               sc[s].sw_seconds[b][k]};
+                for (int i = 0; i < 4; i++) {
+                    rp_exp_dnum(o.f, v[i]);
+                    fputc(i < 3 ? ' ' : '\n', o.f);
+                }
+            }
+            fputs("\n\n", o.f);
+        }
     return rp_out_close(&o, 1, err);
 }
 
@@ -244,6 +279,21 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                 sc[s].hr_seconds[h] = v[2];
             }
         }
+        for (int b = 0; b < 2 && st == RP_OK && !p->quick; b++)
+            for (int k = 0; k < DC_SWEEP && st == RP_OK; k++) {
+                char spec[160];
+                double v[4];
+                /* a tolerance given: the run stops at convergence, its
+                 * time is the time to converge (open-ended, hierarchical
+                 * refines and sweeps until the budget) */
+                snprintf(spec, sizeof spec, "hierarchical:mesh=discontinuity:bf-epsilon=%g:basis=%s:tolerance=1e-6",
+                         dc_sweep_bf[k], dc_basis[b]);
+                if ((st = dc_unit(p, &sc[s], dc_scene_id[s], spec, hr_budget, v, err)) == RP_OK) {
+                    sc[s].sw_rmse[b][k] = v[0];
+                    sc[s].sw_surface_err[b][k] = v[1];
+                    sc[s].sw_seconds[b][k] = v[2];
+                }
+            }
     }
     if (st == RP_OK && rp_exp_handing_out(p))
         goto done;
@@ -259,7 +309,7 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
         }
     char note[256] = "";
     if (st == RP_OK) {
-        char body[4096];
+        char body[8192];
         snprintf(body, sizeof body,
                  "\n@PNG\nset output 'discontinuity.png'\nset logscale xy\nset format y '%%g'\n"
                  "set xlabel 'elements'\nset ylabel 'surface-average relative error (RMS)'\n"
@@ -284,7 +334,17 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                  "'' index 9 using 5:4 with points pt 10 ps 2 title 'Original, hierarchical from the discontinuity mesh', "
                  "'' index 10 using 5:4 with points pt 15 ps 2 title 'Original, hierarchical, linear basis', "
                  "'' index 11 using 5:4 with points pt 14 ps 2 title 'Original, hierarchical, discontinuity mesh, linear basis'\n"
-                 "@SVG\nset output 'discontinuity_time.svg'\nreplot\nunset output\n");
+                 "@SVG\nset output 'discontinuity_time.svg'\nreplot\n%s"
+                 "unset output\n",
+                 p->quick ? ""
+                          : "@PNG\nset output 'discontinuity_bases.png'\nset xlabel 'solver wall time (s)'\n"
+                            "set title 'Hierarchical radiosity from the discontinuity mesh, bf-epsilon 0.1 to 0.01'\n"
+                            "plot 'discontinuity.dat' index 12 using 5:4 with linespoints lw 2 pt 7 title 'Cornell, "
+                            "constant basis', "
+                            "'' index 13 using 5:4 with linespoints lw 2 pt 5 title 'Cornell, linear basis', "
+                            "'' index 14 using 5:4 with linespoints lw 2 pt 9 title 'Original, constant basis', "
+                            "'' index 15 using 5:4 with linespoints lw 2 pt 11 title 'Original, linear basis'\n"
+                            "@SVG\nset output 'discontinuity_bases.svg'\nreplot\n");
         st = rp_exp_draw(p, body, note, sizeof note, err);
     }
     rp_out o;
@@ -299,7 +359,9 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                    "hierarchical radiosity with its defaults for %g s (elements split where B x F asks: adaptive), "
                    "its quadtrees starting from the faces as given and from the faces cut along their D0 and D1 "
                    "lines (`--mesh discontinuity`, no points inside a face), each with the constant basis (an element's "
-                   "mean) and the linear one (`--basis linear`: Galerkin with linear elements, Zatz 1993). "
+                   "mean) and the linear one (`--basis linear`: Galerkin with linear elements, Zatz 1993); in the "
+                   "full form also from the discontinuity mesh at `--bf-epsilon` 0.1, 0.05, 0.02 and 0.01 with each "
+                   "basis, each run to convergence (error against time, `discontinuity_bases.png`). "
                    "Scenes: the Cornell box (`%s`) and "
                    "McGuire's CornellBox-Original (`%s`, two boxes standing on the floor). Each is scored against "
                    "its path-traced reference (surface error: RMS relative error of the surface averages; image "
@@ -314,7 +376,8 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                     dc_scene_id[s], sc[s].ref->exr_path, sc[s].ref->rmse_se, sc[s].ref->surface_rel_se);
         if (!note[0])
             fprintf(f, "![surface error against elements](discontinuity.png)\n\n"
-                       "![surface error against time](discontinuity_time.png)\n\n");
+                       "![surface error against time](discontinuity_time.png)\n\n%s",
+                    p->quick ? "" : "![constant and linear bases, surface error against time](discontinuity_bases.png)\n\n");
         else
             fprintf(f, "**Note:** %s\n\n", note);
         fprintf(f, "| scene | mesh | elements | surface error | RMSE flat | RMSE Gouraud | seconds |\n"
@@ -330,6 +393,11 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
             for (int h = 0; h < DC_HR; h++)
                 fprintf(f, "| %s | %s | | %.4g | | %.4g | %.3g |\n", dc_scene_id[s], dc_hr_name[h],
                         sc[s].hr_surface_err[h], sc[s].hr_rmse[h], sc[s].hr_seconds[h]);
+            for (int b = 0; b < 2 && !p->quick; b++)
+                for (int k = 0; k < DC_SWEEP; k++)
+                    fprintf(f, "| %s | hierarchical-discontinuity, %s basis, bf-epsilon %g | | %.4g | | %.4g | %.3g |\n",
+                            dc_scene_id[s], dc_basis[b], dc_sweep_bf[k], sc[s].sw_surface_err[b][k],
+                            sc[s].sw_rmse[b][k], sc[s].sw_seconds[b][k]);
             for (size_t c = 0; c < nc; c++)
                 holds &= sc[s].rows[1][c].surface_err < sc[s].rows[0][c].surface_err;
         }
@@ -351,7 +419,8 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                            "link, has refined less)"
                          : "");
         fprintf(f, "Columns of discontinuity.csv: scene; mesh (uniform, discontinuity, hierarchical, "
-                   "hierarchical-discontinuity, hierarchical-linear or hierarchical-discontinuity-linear); "
+                   "hierarchical-discontinuity, hierarchical-linear, hierarchical-discontinuity-linear, and in the "
+                   "full form hierarchical-discontinuity-BASIS-bfEPS, the sweep); "
                    "target_elements (asked); elements (made); rmse_flat, rmse_gouraud (W sr^-1 m^-2); surface_err; "
                    "seconds (solver time of the flat run); converged. Hierarchical's image is its own "
                    "vertex reconstruction (rmse_gouraud column).\n");
