@@ -583,13 +583,7 @@ typedef struct img_job {
  * --basis linear its linear function at p). */
 static void eval_flat(const void *ctx, uint32_t face, rp_vec3 p, double *B)
 {
-    const hier_state *s = ((const img_job *)ctx)->s;
-    double w[4];
-    uint32_t leaf = hier_locate(s, face, p, w);
-    if (s->linear)
-        hier_linear_eval(s, leaf, p, B);
-    else
-        memcpy(B, s->B + (size_t)leaf * s->nb, s->nb * sizeof *B);
+    rp_hierarchical_radiosity_at(((const img_job *)ctx)->s, face, p, B);
 }
 
 /* B there interpolated from the leaves' corners. */

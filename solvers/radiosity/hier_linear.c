@@ -20,17 +20,17 @@
  *     G = cos_x cos_y / (pi r^2),
  *
  * so that q gathers rho sum_j K_ij B_p,j into its coefficient i.  K_00 is
- * the link's form factor F as estimated for the constant basis
- * (hier_link.c: the same refinement, visibility and row sums).  The rest
+ * the link's form factor F (hier_link.c: the constant basis's refinement
+ * and visibility, and for links that do not cross each other's planes the
+ * unoccluded part by this rule over x, hier_linear_rule_mean).  The rest
  * are integrated without visibility and scaled by F over their own K_00
  * (a link's visibility taken as uniform over the pair, as the constant
  * basis takes it): over x by a rule exact for quadratics (3 points on a
  * triangle, Strang & Fix 1973; the 2 x 2 Gauss points on a
- * parallelogram), over y by the midpoint rule one level below the source,
- * each quarter's exact point-to-polygon form factor times the source
- * function at its centroid (exact for the linear source function where the
- * kernel is constant over a quarter, as the constant basis's shares,
- * hierarchical.c, are for a piecewise-constant one).
+ * parallelogram), over y from the source's quarters, each one's exact
+ * point-to-polygon form factor times the source function at its centroid,
+ * corrected by the inverse of the centroids' moments so that a kernel
+ * linear across the source is integrated exactly (link_coefficients).
  *
  * Push-pull uses the two-scale relation of a child c of p (exact, since a
  * linear function on p is linear on c): phi^p_i = a_i + sum_k A_ik phi^c_k
@@ -220,7 +220,10 @@ static void link_coefficients(const hier_state *s, const hier_link *l, float out
                 K[i][1] = Mi[0][0] * a + Mi[0][1] * b;
                 K[i][2] = Mi[1][0] * a + Mi[1][1] * b;
             }
-        }
+        } else if (M[0][0] > 1e-12)
+            /* a sliver with one linear function (hier_basis_of) */
+            for (int i = 0; i < 3; i++)
+                K[i][1] /= M[0][0];
     }
     /* The visibility (and the estimate) of the constant basis's F. */
     double v = K[0][0] > 0 ? (double)l->F / K[0][0] : 0;
