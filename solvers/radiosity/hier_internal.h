@@ -393,7 +393,8 @@ double hier_cluster_bound(const hier_state *s, uint32_t recv, uint32_t src);
 /* The basis of a node (its corners, centroid, area and face normal n set). */
 void hier_basis_of(const hier_node *nd, rp_vec3 n, hier_basis *out);
 /* Gives every link without one its coupling coefficients (after each
- * refinement pass), compacting lin_K when most of it is dead. */
+ * refinement pass), compacting lin_K when dead slots would be more than a
+ * fifth of it. */
 rp_status hier_linear_links(hier_state *s, rp_error *err);
 /* Link k's coefficients K[i][j] (i receiver, j source; 0 the constant,
  * 1-2 phi_0, phi_1), K[0][0] = its F. */

@@ -27,8 +27,10 @@
  * (a link's visibility taken as uniform over the pair, as the constant
  * basis takes it): over x by a rule exact for quadratics (3 points on a
  * triangle, Strang & Fix 1973; the 2 x 2 Gauss points on a
- * parallelogram), over y from the source's quarters, each one's exact
- * point-to-polygon form factor times the source function at its centroid,
+ * parallelogram, weighted by the area element on other quads), over y from
+ * the source's quarters, each one's point-to-polygon form factor (the disk
+ * approximation when far, LIN_DISK_RATIO) times the source function at its
+ * centroid,
  * corrected by the inverse of the centroids' moments so that a kernel
  * linear across the source is integrated exactly (link_coefficients).
  *
@@ -36,9 +38,10 @@
  * linear function on p is linear on c): phi^p_i = a_i + sum_k A_ik phi^c_k
  * on c (hier_linear_relation).  Pushing down, c's constant gains a . L and
  * its linear coefficients become A^T L; pulling up, p's linear
- * coefficient i is the area mean over its children of a_i (B_c - B_p) +
- * A_i . B1_c (the L2 projection of the children's functions on p's
- * basis, hierarchical.c, hier_sweep). */
+ * coefficient i is the mean over its children of a_i (B_c - B_p) +
+ * A_i . B1_c, weighted as p's mean is (by area, or by the area some link
+ * reaches, hierarchical.c, hier_sweep): with area weights the L2
+ * projection of the children's functions on p's basis. */
 #include <math.h>
 #include <omp.h>
 #include <stdlib.h>
@@ -150,15 +153,24 @@ static int receiver_rule(const hier_node *q, rp_vec3 x[4], double w[4])
         }
         return 3;
     }
-    /* 2 x 2 Gauss points of the bilinear patch (exact for cubics on a
-     * parallelogram). */
+    /* 2 x 2 Gauss points of the bilinear patch, each weighted by the
+     * patch's area element |dx/ds x dx/dt| there (linear in s and t for a
+     * planar quad), so that the rule stays exact for quadratics in x on
+     * any convex quad, not only on parallelograms (where the weights are
+     * all 1/4). */
     const double g = 0.5 / sqrt(3.0), u[2] = {0.5 - g, 0.5 + g};
+    double sum = 0;
     for (int k = 0; k < 4; k++) {
         double s = u[k & 1], t = u[k >> 1];
         x[k] = rp_v3_add(rp_v3_add(rp_v3_scale(q->v[0], (1 - s) * (1 - t)), rp_v3_scale(q->v[1], s * (1 - t))),
                          rp_v3_add(rp_v3_scale(q->v[2], s * t), rp_v3_scale(q->v[3], (1 - s) * t)));
-        w[k] = 0.25;
+        rp_vec3 ds = rp_v3_add(rp_v3_scale(rp_v3_sub(q->v[1], q->v[0]), 1 - t), rp_v3_scale(rp_v3_sub(q->v[2], q->v[3]), t));
+        rp_vec3 dt = rp_v3_add(rp_v3_scale(rp_v3_sub(q->v[3], q->v[0]), 1 - s), rp_v3_scale(rp_v3_sub(q->v[2], q->v[1]), s));
+        w[k] = rp_v3_length(rp_v3_cross(ds, dt));
+        sum += w[k];
     }
+    for (int k = 0; k < 4; k++)
+        w[k] = sum > 0 ? w[k] / sum : 0.25;
     return 4;
 }
 
@@ -254,7 +266,7 @@ rp_status hier_linear_links(hier_state *s, rp_error *err)
      * a fifth of the pool, the live ones are copied into a new pool, in link
      * order. */
     if (s->nlin_K + fresh > nl + nl / 4 + 1024) {
-        float *pool = malloc((nl - fresh + 1) * 8 * sizeof *pool);
+        float *pool = malloc((nl ? nl : 1) * 8 * sizeof *pool); /* the live ones and the new */
         if (!pool) {
             free(todo);
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu linear links", nl);
@@ -269,7 +281,7 @@ rp_status hier_linear_links(hier_state *s, rp_error *err)
         }
         free(s->lin_K);
         s->lin_K = pool;
-        s->cap_lin_K = nl - fresh + 1;
+        s->cap_lin_K = nl ? nl : 1;
         s->nlin_K = m;
     }
     if (s->nlin_K + fresh > UINT32_MAX || !hier_grow((void **)&s->lin_K, &s->cap_lin_K, s->nlin_K + fresh,

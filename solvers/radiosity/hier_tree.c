@@ -415,7 +415,8 @@ size_t hier_bytes(const hier_state *s)
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face);
     if (s->linear)
-        b += s->cap_nodes * (sizeof(hier_basis) + 6 * s->nb * sizeof(double)) + s->cap_lin_K * 8 * sizeof(float);
+        b += s->cap_nodes * (sizeof(hier_basis) + 6 * s->nb * sizeof(double)) + s->cap_lin_K * 8 * sizeof(float) +
+             (s->ff_lin ? 2 * s->cap_scale * sizeof(double) : 0);
     if (s->clustering)
         b += s->ncl * (sizeof(hier_cluster) + 2 * s->nb * sizeof(double) + 2 * sizeof(uint32_t)) +
              s->nfaces * (3 * sizeof(uint32_t) + sizeof(double)) + s->cl_nn * (sizeof(double) + 1) +
