@@ -408,9 +408,9 @@ void hier_linear_gather(const hier_state *s, uint32_t q, double *acc, double *ac
 /* Push: node i's children's Bd and Bd1 from i's Bd1 + Bg1 (their Bd must
  * already hold i's Bd + Bg). */
 void hier_linear_push(hier_state *s, uint32_t i);
-/* Pull: node i's B1 from its children's, weighted as its B (by W, or by
- * area where W is all zero); i's B must be set. */
-void hier_linear_pull(hier_state *s, uint32_t i, const double *W);
+/* Pull: node i's B1 from its children's, weighted as its B was (w, the
+ * weights of hierarchical.c's pull_children); i's B must be set. */
+void hier_linear_pull(hier_state *s, uint32_t i, const double w[4]);
 /* The form factors reaching each node through its own links and its
  * ancestors' as a linear function on it, S0[i] + S1[2 i .. 2 i + 1] . phi
  * (chain_sums of hierarchical.c with the ancestors' linear parts pushed
@@ -520,6 +520,17 @@ static inline void hier_link_set_slot(hier_link *l, uint32_t slot)
 }
 
 static inline uint32_t hier_link_slot(const hier_link *l) { return (uint32_t)l->share[0] | ((uint32_t)l->share[1] << 16); }
+
+/* --basis linear: a linear function with coefficients L on a node,
+ * restricted to its child (two-scale relation a, A: hier_linear_relation):
+ * returns what it adds to the child's constant, a . L, and writes its
+ * coefficients on the child, A^T L, to out (push, subdivision, row sums). */
+static inline double hier_linear_restrict(const double a[2], const double A[2][2], const double L[2], double out[2])
+{
+    out[0] = A[0][0] * L[0] + A[1][0] * L[1];
+    out[1] = A[0][1] * L[0] + A[1][1] * L[1];
+    return a[0] * L[0] + a[1] * L[1];
+}
 
 /* The four shares of l as fractions (adding up to one). */
 static inline void hier_link_shares(const hier_link *l, double w[4])

@@ -342,27 +342,20 @@ void hier_linear_push(hier_state *s, uint32_t i)
         hier_linear_relation(s, i, c, a, A);
         for (size_t b = 0; b < nb; b++) {
             const size_t at = ((size_t)i * nb + b) * 2, ct = ((size_t)c * nb + b) * 2;
-            double L0 = s->Bd1[at] + s->Bg1[at], L1 = s->Bd1[at + 1] + s->Bg1[at + 1];
-            s->Bd[(size_t)c * nb + b] += a[0] * L0 + a[1] * L1;
-            s->Bd1[ct] = A[0][0] * L0 + A[1][0] * L1;
-            s->Bd1[ct + 1] = A[0][1] * L0 + A[1][1] * L1;
+            const double L[2] = {s->Bd1[at] + s->Bg1[at], s->Bd1[at + 1] + s->Bg1[at + 1]};
+            s->Bd[(size_t)c * nb + b] += hier_linear_restrict(a, A, L, s->Bd1 + ct);
         }
     }
 }
 
-void hier_linear_pull(hier_state *s, uint32_t i, const double *W)
+void hier_linear_pull(hier_state *s, uint32_t i, const double w[4])
 {
     const size_t nb = s->nb;
     const hier_node *nd = &s->nodes[i];
-    double a = 0, w = 0;
-    for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-        a += s->nodes[c].area;
-        w += W[c];
-    }
     for (size_t b = 0; b < nb; b++)
         s->B1[((size_t)i * nb + b) * 2] = s->B1[((size_t)i * nb + b) * 2 + 1] = 0;
     for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-        double wc = w > 0 ? W[c] / w : s->nodes[c].area / a;
+        const double wc = w[c - nd->child];
         double ar[2], A[2][2];
         hier_linear_relation(s, i, c, ar, A);
         for (size_t b = 0; b < nb; b++) {
@@ -394,12 +387,11 @@ void hier_linear_chain_sums(const hier_state *s, double *S0, double *S1)
         if (nd->parent == RP_NONE)
             continue;
         /* The parent's sum, a linear function on it, restricted to i. */
-        double a[2], A[2][2];
-        const double *Sp = S1 + 2 * (size_t)nd->parent;
+        double a[2], A[2][2], r[2];
         hier_linear_relation(s, nd->parent, (uint32_t)i, a, A);
-        S0[i] += S0[nd->parent] + a[0] * Sp[0] + a[1] * Sp[1];
-        S1[2 * i] += A[0][0] * Sp[0] + A[1][0] * Sp[1];
-        S1[2 * i + 1] += A[0][1] * Sp[0] + A[1][1] * Sp[1];
+        S0[i] += S0[nd->parent] + hier_linear_restrict(a, A, S1 + 2 * (size_t)nd->parent, r);
+        S1[2 * i] += r[0];
+        S1[2 * i + 1] += r[1];
     }
 }
 

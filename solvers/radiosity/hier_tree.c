@@ -225,11 +225,8 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err)
             double a[2], A[2][2];
             hier_linear_relation(s, i, c, a, A);
             for (size_t b = 0; b < nb; b++) {
-                const double *L = s->B1 + ((size_t)i * nb + b) * 2;
-                double *B1 = s->B1 + ((size_t)c * nb + b) * 2;
-                s->B[(size_t)c * nb + b] += a[0] * L[0] + a[1] * L[1];
-                B1[0] = A[0][0] * L[0] + A[1][0] * L[1];
-                B1[1] = A[0][1] * L[0] + A[1][1] * L[1];
+                s->B[(size_t)c * nb + b] +=
+                    hier_linear_restrict(a, A, s->B1 + ((size_t)i * nb + b) * 2, s->B1 + ((size_t)c * nb + b) * 2);
                 s->Bg1[((size_t)c * nb + b) * 2] = s->Bg1[((size_t)c * nb + b) * 2 + 1] = 0;
                 s->Bd1[((size_t)c * nb + b) * 2] = s->Bd1[((size_t)c * nb + b) * 2 + 1] = 0;
             }

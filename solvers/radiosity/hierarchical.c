@@ -654,8 +654,10 @@ static void source_radiosity(const hier_state *s, hier_link *l, double *out) { s
  * Returns the relative energy change. */
 /* Push-pull's pull to parent node nd: the mean of its children's values X
  * (nb each) weighted by W (the area each child's reached leaves hold; by
- * area when none is reached) into Xi; returns the parent's weight. */
-static double pull_children(const hier_state *s, const hier_node *nd, const double *W, const double *X, double *Xi)
+ * area when none is reached) into Xi, the four weights into wc (NULL: not
+ * wanted); returns the parent's weight. */
+static double pull_children(const hier_state *s, const hier_node *nd, const double *W, const double *X, double *Xi,
+                            double wc[4])
 {
     const size_t nb = s->nb;
     double a = 0, w = 0;
@@ -666,9 +668,11 @@ static double pull_children(const hier_state *s, const hier_node *nd, const doub
     for (size_t b = 0; b < nb; b++)
         Xi[b] = 0;
     for (uint32_t c = nd->child; c < nd->child + 4; c++) {
-        double wc = w > 0 ? W[c] / w : s->nodes[c].area / a;
+        double wk = w > 0 ? W[c] / w : s->nodes[c].area / a;
+        if (wc)
+            wc[c - nd->child] = wk;
         for (size_t b = 0; b < nb; b++)
-            Xi[b] += wc * X[(size_t)c * nb + b];
+            Xi[b] += wk * X[(size_t)c * nb + b];
     }
     return w;
 }
@@ -767,9 +771,10 @@ static double hier_sweep(hier_state *s)
             W[i] = (W[i] > 0 || emits) ? nd->area : 0;
             continue;
         }
-        W[i] = pull_children(s, nd, W, B, Bi);
+        double wc[4];
+        W[i] = pull_children(s, nd, W, B, Bi, wc);
         if (s->linear)
-            hier_linear_pull(s, (uint32_t)i, W);
+            hier_linear_pull(s, (uint32_t)i, wc);
     }
     double r = 0;
     for (size_t b = 0; b < nb; b++)
@@ -834,7 +839,7 @@ static void importance_sweep(hier_state *s)
             W[i] = W[i] > 0 ? nd->area : 0;
             continue;
         }
-        W[i] = pull_children(s, nd, W, Y, Yi);
+        W[i] = pull_children(s, nd, W, Y, Yi, NULL);
     }
     s->imp_sweeps++;
 }
