@@ -22,9 +22,7 @@
  * directions between the two bounding spheres.  A pair that cannot
  * exchange anything (cones turned away, or one end planar with the other
  * on or behind its plane) is dropped; boxes that touch (and every
- * self-link) are always split, and so are boxes nearly touching: closer
- * than 1/HIER_CL_NEAR of the farthest two of their points (below).  The
- * larger end is split: a cluster into
+ * self-link) are always split.  The larger end is split: a cluster into
  * its two children, a quadtree node (while it stays above --min-area)
  * into its four; a pair of nodes becomes an ordinary face-level link
  * (hier_link.c), refined from then on exactly as without clustering.
@@ -87,26 +85,6 @@
 
 #define CL_SEED UINT64_C(0x6c75737465723031)
 #define CE_SEED UINT64_C(0x636c656e74727931)
-
-/* A link with a cluster at an end is kept only while the distances
- * between its two ends' points lie within a factor HIER_CL_NEAR of each
- * other: gap <= r <= gap x HIER_CL_NEAR, gap the distance between the two
- * boxes and the largest through the bounding spheres (judge).  Its
- * transfer is sampled by point pairs (the entries below), each weighing
- * the kernel cos cos / r^2 at one pair, so this bounds the kernel's
- * variation over the pair, and with it every sample's weight, by
- * HIER_CL_NEAR^2 = 16 times the smallest: what the oracle's bound F_bound
- * does not see.  A pair barely apart, the bunny's lowest clusters 66
- * micro-units above the floor of scenes/bunny.scene, was kept as one link
- * whenever its power was small, and its few samples near the contact
- * decided a share of the bunny's light; so did neighbouring clusters of
- * one mesh whose boxes are apart by a rounding error.  Over seeds 1 to 4
- * the bunny's average read -0.31 to +0.21% against a 2M-sample path
- * tracer at the defaults (red band), and with this bound (and link_pdf's
- * estimates from 32 pairs) -0.08 to +0.12% (stop 28).  Split until the
- * ends are far apart for their size, such pairs end as face-level links
- * near the contact (hier_link.c, the contour integral there). */
-#define HIER_CL_NEAR 4.0
 
 /* ---- items ---- */
 
@@ -413,8 +391,6 @@ static int judge(const hier_state *s, uint32_t r, uint32_t src, double *Fb)
     double rr = 0.5 * rp_v3_length(rp_v3_sub(hr, lr)), rs = 0.5 * rp_v3_length(rp_v3_sub(hs, ls));
     rp_vec3 d = rp_v3_sub(cs, cr);
     double dist = rp_v3_length(d);
-    if (dist + rr + rs > HIER_CL_NEAR * gap)
-        return 0; /* nearly touching: split (HIER_CL_NEAR) */
     rp_vec3 u = dist > 0 ? rp_v3_scale(d, 1.0 / dist) : rp_v3(0, 0, 1);
     /* Directions between the two spheres; all of them when they meet. */
     double sb = dist > rr + rs ? (rr + rs) / dist : 1, cb = sqrt(hier_max(0.0, 1 - sb * sb));
@@ -557,14 +533,8 @@ static uint32_t leaf_at(const hier_state *s, uint32_t f, rp_vec3 y)
  * samples among its links. */
 static double link_unoccluded(const hier_state *s, uint32_t r, uint32_t src)
 {
-    /* 2 --cluster-rays pairs (32 at the defaults).  The estimate shares
-     * the samples (link_pdf), and each sample is weighed by 1 / P(link):
-     * an estimate far off weighs that link's samples far off.  With 4
-     * pairs, the bunny of scenes/bunny.scene in a black room (direct
-     * light and its own interreflection) read -0.51 to +0.07% over seeds
-     * 1 to 8 against a 2M-sample path tracer (standard error 0.13%); with
-     * 32, -0.27 to -0.04% (stop 28).  No rays are cast for it. */
-    const unsigned N = s->cluster_rays < 32 ? 2 * s->cluster_rays : 64;
+    /* A rough estimate is enough to share samples: a few pairs. */
+    const unsigned N = s->cluster_rays < 4 ? s->cluster_rays : 4;
     uint64_t key = hier_key(s->seed ^ CL_SEED, r, src);
     double sum = 0;
     for (unsigned k = 0; k < N; k++) {
