@@ -509,20 +509,29 @@ Test(hier, gouraud_vertices_are_point_values, .init = hsetup)
  * (GSL); the best constant, B's mean there.  The linear solution must come
  * within 1% of the best linear error (measured: 0.2%) and be several times
  * better than the constant basis's solution on the same leaves. */
+/* The unit-square lamp (Le 3) at height c over the receiver given by
+ * `receiver` (scene lines, material floor: rho 1/2), solved with
+ * bf-epsilon 0 down to min_area in basis `basis`; `leaves` leaves expected. */
+static rp_scene *plate_under_lamp(hrun *r, const char *receiver, double c, const char *min_area, const char *basis,
+                                  size_t leaves)
+{
+    char text[512];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial floor reflect 0.5\nmaterial lamp reflect 0 emit 3\n%s"
+             "quad emitter lamp  0 0 %g  0 1 %g  1 1 %g  1 0 %g\n",
+             receiver, c, c, c, c);
+    rp_scene *scene = rp_test_parse(text);
+    const char *kv[] = {"bf-epsilon", "0", "min-area", min_area, "basis", basis, NULL};
+    solve_hier(r, scene, RP_WANT_SURFACES, 0, kv);
+    cr_assert_eq(rp_hierarchical_leaves(r->state, NULL, NULL, NULL, 0), leaves, "leaves: receiver's and the lamp");
+    return scene;
+}
+
 static void linear_plate_errors(const char *basis, double *err, double *best_const, double *best_lin)
 {
     const double c = 0.4, rho = 0.5, Le = 3;
-    char text[512];
-    snprintf(text, sizeof text,
-             "bands grey\nmaterial floor reflect 0.5\nmaterial lamp reflect 0 emit 3\n"
-             "quad receiver floor  0 0 0  1 0 0  1 1 0  0 1 0\n"
-             "quad emitter lamp  0 0 %g  0 1 %g  1 1 %g  1 0 %g\n",
-             c, c, c, c);
-    rp_scene *scene = rp_test_parse(text);
     hrun r;
-    const char *kv[] = {"bf-epsilon", "0", "min-area", "0.02", "basis", basis, NULL};
-    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
-    cr_assert_eq(rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0), 17, "4 x 4 receiver leaves and the lamp");
+    rp_scene *scene = plate_under_lamp(&r, "quad receiver floor  0 0 0  1 0 0  1 1 0  0 1 0\n", c, "0.02", basis, 17);
     gsl_integration_glfixed_table *t = gsl_integration_glfixed_table_alloc(8);
     cr_assert(t);
     double e2 = 0, bc2 = 0, bl2 = 0;
@@ -622,18 +631,11 @@ static int tri_leaves(const tri2 *t, int levels, tri2 *out)
 static void linear_triangle_errors(const char *basis, double *err, double *best_const, double *best_lin)
 {
     const double c = 0.4, rho = 0.5, Le = 3;
-    char text[512];
-    snprintf(text, sizeof text,
-             "bands grey\nmaterial floor reflect 0.5\nmaterial lamp reflect 0 emit 3\n"
-             "triangle lower floor  0 0 0  1 0 0  1 1 0\n"
-             "triangle upper floor  0 0 0  1 1 0  0 1 0\n"
-             "quad emitter lamp  0 0 %g  0 1 %g  1 1 %g  1 0 %g\n",
-             c, c, c, c);
-    rp_scene *scene = rp_test_parse(text);
     hrun r;
-    const char *kv[] = {"bf-epsilon", "0", "min-area", "0.01", "basis", basis, NULL};
-    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
-    cr_assert_eq(rp_hierarchical_leaves(r.state, NULL, NULL, NULL, 0), 33, "16 leaves per triangle and the lamp");
+    rp_scene *scene = plate_under_lamp(&r,
+                                       "triangle lower floor  0 0 0  1 0 0  1 1 0\n"
+                                       "triangle upper floor  0 0 0  1 1 0  0 1 0\n",
+                                       c, "0.01", basis, 33); /* 16 leaves per triangle */
     const tri2 roots[2] = {{{{0, 0}, {1, 0}, {1, 1}}}, {{{0, 0}, {1, 1}, {0, 1}}}};
     gsl_integration_glfixed_table *t = gsl_integration_glfixed_table_alloc(8);
     cr_assert(t);
