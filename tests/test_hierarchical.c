@@ -1876,6 +1876,63 @@ Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout
     rmdir(dir);
 }
 
+/* After every step the receiver offsets of the face-level links cover
+ * every node, and a node's run holds exactly the links it receives: the
+ * gather sweep walks link_start over all nodes.  Nodes made by splitting
+ * a cluster link's quadtree end, in a pass that added no face-level link
+ * and refined none, were once left with the offsets realloc gave them
+ * (hier_link.c hier_links_cover).  A ball over a large floor under a
+ * lamp, clustered, at several refinements. */
+Test(hier, link_offsets_cover_every_node, .init = hsetup, .timeout = 120)
+{
+    char dir[] = "/tmp/radpt-offsets-XXXXXX";
+    cr_assert(mkdtemp(dir));
+    char path[256];
+    snprintf(path, sizeof path, "%s/ball.off", dir);
+    rp_test_mesh ball = rp_test_uv_sphere(16, 10, 0, 10, 0);
+    rp_test_write_off(path, &ball);
+    char text[1024];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial lamp reflect 0 emit 5\nmaterial grey reflect 0.5\n"
+             "mesh ball grey %s scale 0.3 translate 0 0 0.5\n"
+             "quad floor grey -4 -4 0  4 -4 0  4 4 0  -4 4 0\n"
+             "quad lamp lamp -0.5 -0.5 2  -0.5 0.5 2  0.5 0.5 2  0.5 -0.5 2\n",
+             path);
+    rp_scene *scene = rp_test_parse(text);
+    const char *eps[] = {"0.2", "0.05", "0.01"};
+    size_t steps = 0;
+    for (int e = 0; e < 3; e++) {
+        hrun r;
+        rp_error err = {""};
+        const char *kv[] = {"cluster", "on", "bf-epsilon", eps[e], "cluster-rays", "4", NULL};
+        cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_SURFACES, 2, kv, &err), RP_OK, "%s",
+                     err.message);
+        for (int k = 0; k < 200; k++, steps++) {
+            rp_step_info info;
+            memset(&info, 0, sizeof info);
+            cr_assert_eq(r.type->step(r.state, &info, &err), RP_OK, "%s", err.message);
+            const hier_state *s = r.state;
+            cr_assert_eq(s->start_nn, s->nnodes, "bf-epsilon %s, step %d: offsets for %zu of %zu nodes", eps[e], k,
+                         s->start_nn, s->nnodes);
+            cr_assert_eq(s->link_start[0], 0);
+            for (size_t i = 0; i < s->nnodes; i++) {
+                cr_assert_leq(s->link_start[i], s->link_start[i + 1], "node %zu", i);
+                for (uint32_t l = s->link_start[i]; l < s->link_start[i + 1]; l++)
+                    cr_assert_eq(s->links[l].recv, i, "link %u in node %zu's run", l, i);
+            }
+            cr_assert_eq(s->link_start[s->nnodes], s->nlinks);
+            if (info.converged)
+                break;
+        }
+        hrun_end(&r);
+    }
+    cr_log_info("%zu steps checked", steps);
+    rp_scene_destroy(scene);
+    rp_test_mesh_free(&ball);
+    unlink(path);
+    rmdir(dir);
+}
+
 /* ---- importance (Smits, Arvo & Salesin 1992), --importance ------------ */
 
 /* --importance none is the solver as it was before the option: the

@@ -1206,7 +1206,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     s->cap_clinks = capk;
     s->nclinks = nk;
     kept = NULL;
-    if (nfl && (st = hier_links_add(s, flinks, nfl, err)) != RP_OK)
+    if ((st = hier_links_add(s, flinks, nfl, err)) != RP_OK) /* (with nfl 0: hier_links_cover) */
         goto done;
     if (first) {
         s->clinks_initial = s->nclinks;
