@@ -349,11 +349,12 @@ static const char *ms_row(const char *csv, const char *scene, const char *label)
  * radiosity solves on far fewer faces with less memory, and its surface
  * averages stay as close to the path-traced reference as the full mesh's
  * (within half a percentage point); the bunny's within 1% at the quick
- * form's fast setting.  (That holds at the experiment's seed 1, +0.60%;
- * over seeds 1 to 7 the bunny at that setting reads +0.31 to +2.45%
- * against a 2M-sample path tracer, stop 28, docs/design.md: a
- * regression check of one run, not a bound on the method.)  Growth: four times the faces (the same surface,
- * subdivided) costs the simplified solve under 1.5 times the memory. */
+ * form's fast setting.  (That holds at the experiment's seed 1,
+ * +0.60%; over seeds 1 to 7 the bunny at that setting reads +0.31 to
+ * +2.45% against a 2M-sample path tracer, stop 28, docs/design.md: a
+ * regression check of one run, not a bound on the method.)  Growth:
+ * four times the faces (the same surface, subdivided) costs the
+ * simplified solve under 1.5 times the memory. */
 Test(experiments, modelsize_quick_form_holds_its_claim, .timeout = 900)
 {
     char root[64], cache[512];

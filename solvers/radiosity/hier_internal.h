@@ -223,7 +223,9 @@ typedef struct hier_state {
     size_t nlinks, cap_links;
     uint32_t *link_start; /* nnodes + 1 offsets into links (CSR by receiver) */
     size_t cap_start;
-    size_t start_nn;     /* the node count link_start covers (hier_links_cover) */
+    size_t start_nn;     /* the node count link_start covers: every pass that
+                            makes nodes ends in links_adopt or
+                            hier_links_cover, before anything reads it */
     hier_link *spare;    /* the previous list, reused by the next sort */
     size_t cap_spare;
 
