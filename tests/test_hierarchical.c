@@ -1786,6 +1786,28 @@ static double lambert_triangle(const double *p, const double *n, const double *a
     return fabs(s) / (2 * M_PI);
 }
 
+/* A unit UV sphere (slices x stacks, fronts outward) written as ball.off
+ * in a new temporary directory; scenes name it by its full path. */
+typedef struct temp_ball {
+    char dir[32], path[64];
+} temp_ball;
+
+static void temp_ball_write(temp_ball *b, int slices, int stacks)
+{
+    snprintf(b->dir, sizeof b->dir, "/tmp/radpt-ball-XXXXXX");
+    cr_assert(mkdtemp(b->dir));
+    snprintf(b->path, sizeof b->path, "%s/ball.off", b->dir);
+    rp_test_mesh m = rp_test_uv_sphere(slices, stacks, 0, stacks, 0);
+    rp_test_write_off(b->path, &m);
+    rp_test_mesh_free(&m);
+}
+
+static void temp_ball_remove(const temp_ball *b)
+{
+    unlink(b->path);
+    rmdir(b->dir);
+}
+
 /* A ball of 720 faces (radius 0.1, emitting Le = 1) far above a small patch
  * (side 0.02, reflectance 0.5, facing it at distance 2), clustered, with an
  * oracle so loose that no cluster link is refined: the patch's radiance is
@@ -1796,19 +1818,15 @@ static double lambert_triangle(const double *p, const double *n, const double *a
  * patch to that cluster is at least the exact one. */
 Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout = 120)
 {
-    char dir[] = "/tmp/radpt-cluster-XXXXXX";
-    cr_assert(mkdtemp(dir));
-    char path[256];
-    snprintf(path, sizeof path, "%s/ball.off", dir);
-    rp_test_mesh ball = rp_test_uv_sphere(24, 16, 0, 16, 0);
-    rp_test_write_off(path, &ball);
+    temp_ball ball;
+    temp_ball_write(&ball, 24, 16);
     const double R = 0.1, D = 2;
     char text[1024];
     snprintf(text, sizeof text,
              "bands grey\nmaterial lamp reflect 0 emit 1\nmaterial grey reflect 0.5\n"
              "mesh ball lamp %s scale %g translate 0 0 %g\n"
              "quad patch grey -0.01 -0.01 0  0.01 -0.01 0  0.01 0.01 0  -0.01 0.01 0\n",
-             path, R, D);
+             ball.path, R, D);
     rp_scene *scene = rp_test_parse(text);
     const size_t nf = rp_scene_nfaces(scene);
     const rp_face *faces = rp_scene_faces(scene);
@@ -1871,9 +1889,7 @@ Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout
     hrun_end(&r);
     free(Ff);
     rp_scene_destroy(scene);
-    rp_test_mesh_free(&ball);
-    unlink(path);
-    rmdir(dir);
+    temp_ball_remove(&ball);
 }
 
 /* After every step the receiver offsets of the face-level links cover
@@ -1885,19 +1901,15 @@ Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout
  * lamp, clustered, at several refinements. */
 Test(hier, link_offsets_cover_every_node, .init = hsetup, .timeout = 120)
 {
-    char dir[] = "/tmp/radpt-offsets-XXXXXX";
-    cr_assert(mkdtemp(dir));
-    char path[256];
-    snprintf(path, sizeof path, "%s/ball.off", dir);
-    rp_test_mesh ball = rp_test_uv_sphere(16, 10, 0, 10, 0);
-    rp_test_write_off(path, &ball);
+    temp_ball ball;
+    temp_ball_write(&ball, 16, 10);
     char text[1024];
     snprintf(text, sizeof text,
              "bands grey\nmaterial lamp reflect 0 emit 5\nmaterial grey reflect 0.5\n"
              "mesh ball grey %s scale 0.3 translate 0 0 0.5\n"
              "quad floor grey -4 -4 0  4 -4 0  4 4 0  -4 4 0\n"
              "quad lamp lamp -0.5 -0.5 2  -0.5 0.5 2  0.5 0.5 2  0.5 -0.5 2\n",
-             path);
+             ball.path);
     rp_scene *scene = rp_test_parse(text);
     const char *eps[] = {"0.2", "0.05", "0.01"};
     size_t steps = 0, filled = 0;
@@ -1934,9 +1946,7 @@ Test(hier, link_offsets_cover_every_node, .init = hsetup, .timeout = 120)
     cr_log_info("%zu steps checked, %zu of them made nodes for cluster links only", steps, filled);
     cr_assert_gt(filled, 0, "no step made nodes without face-level links: the case is not exercised");
     rp_scene_destroy(scene);
-    rp_test_mesh_free(&ball);
-    unlink(path);
-    rmdir(dir);
+    temp_ball_remove(&ball);
 }
 
 /* ---- importance (Smits, Arvo & Salesin 1992), --importance ------------ */

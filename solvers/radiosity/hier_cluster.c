@@ -1206,7 +1206,9 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     s->cap_clinks = capk;
     s->nclinks = nk;
     kept = NULL;
-    if ((st = hier_links_add(s, flinks, nfl, err)) != RP_OK) /* (with nfl 0: hier_links_cover) */
+    /* Also with nfl 0: the nodes this pass split for cluster links need
+     * their (empty) runs of face-level links (hier_link.c). */
+    if ((st = hier_links_add(s, flinks, nfl, err)) != RP_OK)
         goto done;
     if (first) {
         s->clinks_initial = s->nclinks;

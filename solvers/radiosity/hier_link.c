@@ -486,10 +486,10 @@ static rp_status hier_links_cover(hier_state *s, rp_error *err)
         return RP_OK;
     if (!s->link_start) /* no sort yet (a clustered scene's first pass) */
         return links_adopt(s, s->links, s->nlinks, err);
-    /* (nodes are never removed, so start_nn < nn here) */
-    /* Nodes made since the last sort (the split end of a cluster link,
-     * hier_cluster.c) have no face-level links yet (links change only
-     * through links_adopt): empty runs at the end of the list.  Until
+    /* Nodes are never removed, so start_nn < nn here.  Nodes made since
+     * the last sort (the split end of a cluster link, hier_cluster.c) have
+     * no face-level links yet (links change only through links_adopt):
+     * empty runs at the end of the list.  Until
      * stop 28 their offsets were left unwritten, as realloc gave them or
      * past the end of the array once the nodes outgrew it, and the next
      * sweep read them, when a pass split nodes for cluster links only and
