@@ -59,8 +59,11 @@ enum {
                                      visible (hier_link_eval) */
     HIER_LINK_SHARES = 1u << 4,   /* share[] holds the source's children's
                                      shares (hierarchical.c, source_value) */
-    HIER_LINK_COEF = 1u << 5      /* --basis linear: share[0], share[1] hold
+    HIER_LINK_COEF = 1u << 5,     /* --basis linear: share[0], share[1] hold
                                      the link's slot in lin_K (hier_linear.c) */
+    HIER_LINK_PENDING = 1u << 6   /* F is not set yet: the value's rays wait
+                                     for the oracle (hier_refine), which
+                                     does not read F */
 };
 
 /* A link's shares of its source's four children are kept in 16 bits as
