@@ -50,8 +50,13 @@ void hier_surfaces(const hier_state *s, double *out)
         uint32_t sf = s->faces[nd->face].surface;
         if (area)
             area[sf] += nd->area;
-        for (size_t b = 0; b < nb; b++)
-            out[sf * nb + b] += nd->area * s->B[i * nb + b];
+        /* B is the radiosity of the leaf's open part (hier_open.c): its
+         * enclosed part only emits. */
+        const double f = hier_open_fraction(s, (uint32_t)i);
+        for (size_t b = 0; b < nb; b++) {
+            double e = RP_PI * s->faces[nd->face].Le[b];
+            out[sf * nb + b] += nd->area * (e + f * (s->B[i * nb + b] - e));
+        }
     }
     const rp_surface *surf = rp_scene_surfaces(s->scene);
     for (size_t k = 0; k < ns; k++) {

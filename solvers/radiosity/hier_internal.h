@@ -208,6 +208,11 @@ typedef struct hier_state {
     size_t nnodes, cap_nodes;
     double *B;           /* nnodes x nb: radiosity (area mean over the node) */
     double *Bg;          /* nnodes x nb: rho x radiosity gathered by the node's links */
+    /* --open-fraction (hier_open.c): per node, the fraction of its area
+     * not enclosed by other geometry; open_n nodes measured so far. */
+    int open_on;
+    double *open;
+    size_t open_n, cap_open;
     double *Bd;          /* nnodes x nb: gathered radiosity pushed down from ancestors */
     double *W;           /* nnodes: weight in the pull, the area of the leaves
                             below that some link reaches (see hier_sweep) */
@@ -368,6 +373,12 @@ rp_status hier_link_initial(hier_state *s, rp_error *err);
 /* One refinement pass with the current radiosities (Hanrahan et al. 1991,
  * sec. 5, "BF refinement"); *refined gets the links replaced. */
 rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err);
+
+/* Measures the open fraction of the nodes made since the last call
+ * (--open-fraction, hier_open.c). */
+rp_status hier_open_update(hier_state *s, rp_error *err);
+/* Node i's open fraction (1 when --open-fraction is off or does not apply). */
+double hier_open_fraction(const hier_state *s, uint32_t i);
 
 /* Evaluates face-level link q <- p (0: none, 1: link, 2: every ray blocked). */
 int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out, double *rays);

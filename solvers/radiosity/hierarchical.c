@@ -114,6 +114,12 @@ static const rp_option_spec hier_options[] = {
      "only an image is wanted (render), else none.  It weighs the links between elements, not those of "
      "clusters.  Default none: on the scenes measured it saved no time (docs/design.md)",
      "none"},
+    {"open-fraction", "on|off",
+     "a constant element's value is that of its part not enclosed by other geometry (the floor "
+     "under a box standing on it), measured by rays from a grid of points on it, rather than the "
+     "mean over the whole element; open scenes with the constant basis only (in an enclosure the "
+     "row sums do this)",
+     "on"},
     {"basis", "constant|linear",
      "the functions radiosity is expanded in on each element: its area mean, or a linear function "
      "(Galerkin, Zatz 1993; three coefficients per band, nine coupling coefficients per link)",
@@ -263,6 +269,7 @@ static void hier_fini(void *state)
     hier_importance_free(s);
     hier_cluster_free(s);
     hier_linear_free(s);
+    free(s->open);
     memset(s, 0, sizeof *s);
 }
 
@@ -471,6 +478,10 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     if (bm && strcmp(bm, "constant") != 0 && strcmp(bm, "linear") != 0)
         return rp_error_set(err, RP_ERR_INPUT, "hierarchical: --basis: '%s' is not constant or linear", bm);
     s->linear = bm && strcmp(bm, "linear") == 0;
+    const char *of = rp_options_word(o, "open-fraction");
+    if (of && strcmp(of, "on") != 0 && strcmp(of, "off") != 0)
+        return rp_error_set(err, RP_ERR_INPUT, "hierarchical: --open-fraction: '%s' is not on or off", of);
+    const int open_fraction = !of || strcmp(of, "on") == 0;
     const char *rm = rp_options_word(o, "reconstruct");
     if (rm) {
         if (strcmp(rm, "flat") == 0)
@@ -570,6 +581,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     if (s->clustering && (st = hier_cluster_init(s, err)) != RP_OK)
         return st;
     s->enclosure = scene_is_enclosure(s);
+    s->open_on = open_fraction && !s->enclosure && !s->linear;
     if (s->importance != HIER_IMP_NONE) {
         if ((st = hier_importance_init(s, err)) != RP_OK)
             return st;
@@ -713,6 +725,13 @@ static double hier_sweep(hier_state *s)
             Bg[(size_t)qi * nb + b] = rho[b] * acc[b];
     }
     hier_cluster_gather_nodes(s, Bg);
+    if (s->open_on)
+        /* What a node gathers is its open fraction times what its open
+         * part gathers (hier_open.c). */
+        for (size_t i = 0; i < nn; i++)
+            if (s->open[i] > 0)
+                for (size_t b = 0; b < nb; b++)
+                    Bg[i * nb + b] /= s->open[i];
     /* Push (sec. 4.2): parents come before their children in node order.
      * W temporarily marks nodes that some link reaches (theirs or an
      * ancestor's). */
@@ -768,7 +787,7 @@ static double hier_sweep(hier_state *s)
                         double slope = s->enclosure ? s->ff_lin[2 * i + (size_t)k] : 0;
                         s->B1[at] = scale * (s->Bg1[at] + s->Bd1[at]) - g0 * slope;
                     }
-            W[i] = (W[i] > 0 || emits) ? nd->area : 0;
+            W[i] = (W[i] > 0 || emits) ? nd->area * hier_open_fraction(s, (uint32_t)i) : 0;
             continue;
         }
         double wc[4];
@@ -907,7 +926,7 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
     refined += crefined;
     if (s->linear && (st = hier_linear_links(s, err)) != RP_OK)
         return st;
-    if ((st = update_scale(s, err)) != RP_OK)
+    if ((st = update_scale(s, err)) != RP_OK || (st = hier_open_update(s, err)) != RP_OK)
         return st;
     if (s->importance != HIER_IMP_NONE) {
         /* Importance and radiosity alternate (Smits et al. 1992): one

@@ -1,0 +1,103 @@
+/* The open part of each element (--open-fraction).
+ *
+ * A constant element stands for the mean radiosity of its area.  Where
+ * another object rests on a face (a box standing on the floor) an element
+ * that crosses the object's outline is partly enclosed: the part under the
+ * box neither gathers light nor is seen.  Its links' visibility rays, drawn
+ * over the whole element, find that part blocked, so what the element
+ * gathers is its open fraction f times the radiosity of the open part, and
+ * the element shows and sends that diluted mean to everything that sees
+ * only the open part: on the Cornell box at `--bf-epsilon 0.05 --min-area
+ * 1e-4` the box sides came out 3% dark and the ceiling 1 to 3% (the D0
+ * discontinuities of Heckbert 1992 and Lischinski, Tampieri & Greenberg
+ * 1992, which --mesh discontinuity removes by cutting the faces along
+ * them; this measures them instead, for any mesh and refinement).
+ *
+ * Here each node's open fraction f is measured once, when the node is
+ * made: a grid of points on it, each enclosed when every one of a few
+ * fixed rays from it lands on the back of a face (the inside of the box);
+ * a node whose coarse grid is neither all open nor all enclosed is
+ * measured again on a fine grid.  The gather divides what a node gathers
+ * by its f, so its value is that of its open part (what the camera and
+ * other elements see); the pull weighs a leaf by its open area, and a
+ * surface's average counts the enclosed part as emission only
+ * (hier_surfaces).  In an enclosure the row sums already do this (the
+ * leaf's form factors sum to f, update_scale), and the linear basis keeps
+ * the whole element's function, so neither uses it.
+ *
+ * Links that cast no rays (shaft culling) are consistent with this: a
+ * link from a partly enclosed floor leaf to the box side standing on it
+ * crosses the side's plane, and its form factor and rays cover only the
+ * part in front of the side (hier_link.c), the open part; any other source
+ * is seen from the enclosed part only through the box's faces, which then
+ * lie between the two and are tested.  Measured on the Cornell box: RMS
+ * surface error 0.30% against 0.69% at the defaults, 1.43% against 1.81%
+ * at --bf-epsilon 0.05 --min-area 1e-4 (image RMSE 0.00216 against
+ * 0.00232, image mean -0.3% against -1.0%), for 7% more rays
+ * (README.md). */
+#include <math.h>
+#include <stdlib.h>
+
+#include "hier_internal.h"
+
+/* Coarse and fine grids of points per side, and rays per point (one along
+ * the normal, the rest 1 radian off it around the normal). */
+#define OPEN_COARSE 3
+#define OPEN_FINE 12
+#define OPEN_RAYS 5
+
+/* 1 if every ray from point x (on a face with normal n) lands on the back
+ * of a face; k turns the ray ring from point to point. */
+static int point_enclosed(const hier_state *s, rp_vec3 x, rp_vec3 n, int k, double *rays)
+{
+    rp_vec3 t, b;
+    rp_v3_basis(n, &t, &b);
+    for (int d = 0; d < OPEN_RAYS; d++) {
+        rp_vec3 dir = n;
+        if (d > 0) {
+            double phi = 2 * RP_PI * (d - 1) / (OPEN_RAYS - 1) + 0.9 * k;
+            dir = rp_v3_scale(n, cos(1.0));
+            dir = rp_v3_madd(dir, t, sin(1.0) * cos(phi));
+            dir = rp_v3_madd(dir, b, sin(1.0) * sin(phi));
+        }
+        rp_hit hit;
+        *rays += 1;
+        if (!rp_ray_closest_from(s->rc, x, n, dir, &hit) || hit.front)
+            return 0;
+    }
+    return 1;
+}
+
+/* Open fraction of node nd on a g x g grid of cell centres. */
+static double grid_open(const hier_state *s, const hier_node *nd, int g, double *rays)
+{
+    rp_vec3 n = s->faces[nd->face].n;
+    int open = 0;
+    for (int k = 0; k < g * g; k++) {
+        rp_vec3 x = hier_node_point(nd, (k % g + 0.5) / g, (k / g + 0.5) / g);
+        open += !point_enclosed(s, x, n, k, rays);
+    }
+    return (double)open / (g * g);
+}
+
+rp_status hier_open_update(hier_state *s, rp_error *err)
+{
+    if (!s->open_on || s->open_n == s->nnodes)
+        return RP_OK;
+    if (!hier_grow((void **)&s->open, &s->cap_open, s->nnodes, sizeof *s->open))
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for open fractions");
+    double rays = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64) reduction(+ : rays)
+    for (long i = (long)s->open_n; i < (long)s->nnodes; i++) {
+        const hier_node *nd = &s->nodes[i];
+        double f = grid_open(s, nd, OPEN_COARSE, &rays);
+        if (f > 0 && f < 1)
+            f = grid_open(s, nd, OPEN_FINE, &rays);
+        s->open[i] = f;
+    }
+    s->rays += rays;
+    s->open_n = s->nnodes;
+    return RP_OK;
+}
+
+double hier_open_fraction(const hier_state *s, uint32_t i) { return s->open_on ? s->open[i] : 1.0; }
