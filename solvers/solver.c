@@ -151,10 +151,13 @@ rp_status rp_options_uint(const rp_options *o, const char *name, unsigned long l
     char *end;
     errno = 0;
     if (*v == '-' || *v == '+')
-        return rp_error_set(err, RP_ERR_INPUT, "--%s: '%s' is not a whole number", name, v);
+        return rp_error_set(err, RP_ERR_INPUT, "--%s: '%s' is not a whole number in [%lu, %lu] (no sign)", name, v,
+                            lo, hi);
     unsigned long x = strtoul(v, &end, 10);
-    if (end == v || *end != '\0' || errno == ERANGE)
+    if (end == v || *end != '\0')
         return rp_error_set(err, RP_ERR_INPUT, "--%s: '%s' is not a whole number", name, v);
+    if (errno == ERANGE)
+        return rp_error_set(err, RP_ERR_INPUT, "--%s: %s is outside [%lu, %lu]", name, v, lo, hi);
     if (x < lo || x > hi)
         return rp_error_set(err, RP_ERR_INPUT, "--%s: %s is outside [%lu, %lu]", name, v, lo, hi);
     *out = x;

@@ -24,7 +24,7 @@ static void print_usage(FILE *f)
           "      bands, camera, surfaces (material, faces, area, emitted power), whether the\n"
           "      scene is closed, and the default radiosity subdivision with its quality\n"
           "  radpt render SCENE --method M [method options] [--seed S] [--threads T]\n"
-          "               [--time SECONDS] -o OUT.exr [--png OUT.png [--exposure EV]]\n"
+          "               [--time SECONDS] -o OUT.exr|OUT.png|OUT.pfm [--png OUT.png [--exposure EV]]\n"
           "               [--checkpoint FILE [--checkpoint-every SECONDS]] [--resume FILE]\n"
           "      render the scene's camera view; EXR of linear radiance, PNG preview.\n"
           "      The preview's exposure is automatic (the 99th-percentile luminance maps\n"

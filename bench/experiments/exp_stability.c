@@ -17,6 +17,7 @@
  *   6 thin and coincident geometry: acne and leaks against --ray-offset;
  *   7 non-physical input: refused, with the messages and exit status. */
 #include <math.h>
+#include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -2140,7 +2141,7 @@ rp_status rp_exp_stability(const rp_experiment_params *p, rp_error *err)
             fprintf(f, "Runtime: %.1f s (", total);
             for (size_t i = 0; i < ns; i++)
                 fprintf(f, "%s%s %.1f s", i ? ", " : "", sections[i].name, sections[i].seconds);
-            fprintf(f, "); threads: %d (0: all).\n\n", p->threads);
+            fprintf(f, "); threads: %d.\n\n", p->threads > 0 ? p->threads : omp_get_max_threads());
             if (S.gp_note[0])
                 fprintf(f, "**Note:** %s\n\n", S.gp_note);
             fwrite(S.mdbuf, 1, S.mdlen, f);

@@ -406,6 +406,8 @@ static void describe_setting(FILE *f, const char *label, const rp_experiment_set
         fprintf(f, " reference %lu spp;", s->reference_spp);
     if (s->methods)
         fprintf(f, " methods %s", s->methods);
+    if (!(s->budget > 0) && !s->seeds && !s->reference_spp && !s->methods)
+        fputs(" the experiment's own (its sections and methods are in README.md)", f);
     fputc('\n', f);
 }
 
@@ -511,7 +513,7 @@ static const rp_experiment experiments[] = {
      .run = rp_exp_progressive},
     {.name = "hierarchy",
      .summary = "hierarchical radiosity against the classic solvers, and links against leaves as bf-epsilon "
-                "shrinks (when registered)",
+                "shrinks",
      .scenes = "scenes/cornell.scene",
      .claim = "hierarchical radiosity reaches a given error sooner than the uniform solvers, and its links grow "
               "about linearly with its leaves, not quadratically",

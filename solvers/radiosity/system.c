@@ -141,8 +141,11 @@ rp_status rp_rad_mesh_segments(const char *method, const rp_options *o, int disc
     rp_status st = rp_options_uint(o, "mesh-segments", 1, 1u << 20, segs, err);
     if (st != RP_OK)
         return st;
+    /* Given without --mesh discontinuity (a script that spells out every
+     * default): it has nothing to act on, and the run says so. */
     if (rp_options_get(o, "mesh-segments") && !disc)
-        return rp_error_set(err, RP_ERR_INPUT, "%s: --mesh-segments needs --mesh discontinuity", method);
+        rp_logf(o->log, o->log_ctx, "warning: %s: --mesh-segments %s ignored: it applies to --mesh discontinuity only",
+                method, rp_options_get(o, "mesh-segments"));
     return RP_OK;
 }
 
