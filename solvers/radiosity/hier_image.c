@@ -2,7 +2,8 @@
  * leaves of the quadtrees; the camera loop is the uniform solvers'
  * (rp_recon_camera), with the shading below.
  *
- * Surface averages are the area-weighted leaf radiosities over pi.
+ * Surface averages are the area-weighted leaf radiosities over pi, the
+ * enclosed part of a leaf (hier_open.c) counting its emission only.
  *
  * Images are filtered as the path tracer's and the uniform solvers': spp
  * camera rays per pixel through the shared pinhole camera (camera.h), box
@@ -316,9 +317,12 @@ static void node_changes(const hier_state *s, uint32_t a, rp_vec3 x, rp_vec3 n, 
         if (l->flags & HIER_LINK_PARTIAL)
             F *= point_visibility(s, x, n, p, hier_key(key, k, 0), rays);
         link_source(s, l, Bp);
-        *dF += F - l->F;
+        /* the form factor the sweep gathered through: F_l over a's open
+         * fraction (hier_open.c) */
+        const double Fg = l->F / hier_open_divisor(s, a);
+        *dF += F - Fg;
         for (size_t b = 0; b < nb; b++)
-            dg[b] += (F - l->F) * Bp[b];
+            dg[b] += (F - Fg) * Bp[b];
     }
 }
 

@@ -56,7 +56,7 @@ enum {
     HIER_LINK_INVISIBLE = 1u << 3, /* every deciding ray blocked: kept only
                                      until the oracle decides not to refine
                                      it, unless the value's rays found it
-                                     visible (hier_link_eval) */
+                                     visible (link_value, hier_link.c) */
     HIER_LINK_SHARES = 1u << 4,   /* share[] holds the source's children's
                                      shares (hierarchical.c, source_value) */
     HIER_LINK_COEF = 1u << 5,     /* --basis linear: share[0], share[1] hold
@@ -214,8 +214,9 @@ typedef struct hier_state {
     double *open;
     size_t open_n, cap_open;
     double *Bd;          /* nnodes x nb: gathered radiosity pushed down from ancestors */
-    double *W;           /* nnodes: weight in the pull, the area of the leaves
-                            below that some link reaches (see hier_sweep) */
+    double *W;           /* nnodes: weight in the pull, the open area
+                            (hier_open.c) of the leaves below that some
+                            link reaches (see hier_sweep) */
     /* Row-sum normalisation in an enclosure (hierarchical.c, hier_sweep):
      * enclosure is 1 when every ray leaving a front lands on a front, so
      * the exact form factors of any element sum to 1; ff_scale[i] is then
@@ -379,6 +380,19 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err);
 rp_status hier_open_update(hier_state *s, rp_error *err);
 /* Node i's open fraction (1 when --open-fraction is off or does not apply). */
 double hier_open_fraction(const hier_state *s, uint32_t i);
+/* What node i's gathered radiosity is divided by: its open fraction, but
+ * not less than the resolution of a link's rays (hier_open.c). */
+double hier_open_divisor(const hier_state *s, uint32_t i);
+
+/* The direction theta radians off unit normal n, at azimuth phi about it
+ * in the frame (t, b) of rp_v3_basis(n): the rings of fixed rays that
+ * probe what surrounds a point (scene_is_enclosure, hier_open.c). */
+static inline rp_vec3 hier_ring_dir(rp_vec3 n, rp_vec3 t, rp_vec3 b, double theta, double phi)
+{
+    rp_vec3 d = rp_v3_scale(n, cos(theta));
+    d = rp_v3_madd(d, t, sin(theta) * cos(phi));
+    return rp_v3_madd(d, b, sin(theta) * sin(phi));
+}
 
 /* Evaluates face-level link q <- p (0: none, 1: link, 2: every ray blocked). */
 int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out, double *rays);

@@ -286,7 +286,8 @@ static double link_value(const hier_state *s, hier_link *l, double F, double *ra
 
 /* Evaluates link q <- p into *out.  Returns 0 if there is no link (the two
  * do not face each other, or no part of q sees p), 1 for a link, 2 for a
- * link every visibility ray found blocked (not stored).  With defer, a
+ * link every visibility ray of both sets found blocked (dropped once the
+ * oracle would not refine it, hier_refine).  With defer, a
  * link that casts rays casts only the deciding set: it is marked
  * HIER_LINK_PENDING, *Fu gets its unoccluded form factor, and link_value
  * completes it once the oracle keeps it (returning 1 for it). */
@@ -773,7 +774,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                         fact[k] = 1;
             }
             /* The oracle has decided: the links it keeps cast their
-             * value's rays now (link_eval), and a link split in the round
+             * value's rays now (link_value), and a link split in the round
              * that made it never does (its children replace it). */
             double vrays = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64) reduction(+ : vrays) if (nfresh > 256)

@@ -57,8 +57,8 @@
 static const rp_option_spec hier_options[] = {
     {"bf-epsilon", "EPS",
      "refine a link while rho_receiver x B_source x F exceeds EPS x the mean emitted radiosity "
-     "over the faces that reflect or emit (BF refinement); 0 refines every link down to --min-area "
-     "(uniform refinement: at the default --min-area, minutes and gigabytes on the Cornell box)",
+     "over the faces that reflect or emit (BF refinement); 0 refines nearly every link down to "
+     "--min-area (minutes and gigabytes on the Cornell box at the default --min-area)",
      HIER_DEFAULT_BF},
     {"min-area", "FRAC",
      "smallest element area, as a fraction of the area of the faces that reflect or emit (black "
@@ -77,7 +77,7 @@ static const rp_option_spec hier_options[] = {
      "(refined towards a penumbra they may hide, then dropped)",
      "0.25"},
     {"vis-rays", "N",
-     "visibility rays per set (rounded to a square, at most 64); a link casts two independent sets, "
+     "visibility rays per set (rounded to a square, at most 64); a link the oracle keeps casts two independent sets, "
      "one to decide its refinement and one for the visibility it keeps, so that shadows are unbiased",
      "16"},
     {"tolerance", "EPS",
@@ -306,11 +306,8 @@ static int scene_is_enclosure(const hier_state *s)
             rp_vec3 x = hier_node_point(nd, uv[k][0], uv[k][1]);
             for (int d = 0; d < 7; d++) {
                 rp_vec3 dir = n;
-                if (d > 0) {
-                    double phi = 2 * RP_PI * (d - 1) / 6.0 + 0.7 * k, th = 1.3;
-                    dir = rp_v3_add(rp_v3_scale(n, cos(th)),
-                                    rp_v3_add(rp_v3_scale(t, sin(th) * cos(phi)), rp_v3_scale(b, sin(th) * sin(phi))));
-                }
+                if (d > 0)
+                    dir = hier_ring_dir(n, t, b, 1.3, 2 * RP_PI * (d - 1) / 6.0 + 0.7 * k);
                 rp_hit hit;
                 if (!rp_ray_closest_from(s->rc, x, n, dir, &hit) || !hit.front)
                     return 0;
@@ -666,8 +663,8 @@ static void source_radiosity(const hier_state *s, hier_link *l, double *out) { s
 /* One Jacobi sweep: gather over every node's links, then push-pull.
  * Returns the relative energy change. */
 /* Push-pull's pull to parent node nd: the mean of its children's values X
- * (nb each) weighted by W (the area each child's reached leaves hold; by
- * area when none is reached) into Xi, the four weights into wc (NULL: not
+ * (nb each) weighted by W (the open area, hier_open.c, each child's
+ * reached leaves hold; by area when none is reached) into Xi, the four weights into wc (NULL: not
  * wanted); returns the parent's weight. */
 static double pull_children(const hier_state *s, const hier_node *nd, const double *W, const double *X, double *Xi,
                             double wc[4])
@@ -729,10 +726,12 @@ static double hier_sweep(hier_state *s)
     if (s->open_on)
         /* What a node gathers is its open fraction times what its open
          * part gathers (hier_open.c). */
-        for (size_t i = 0; i < nn; i++)
-            if (s->open[i] > 0)
+        for (size_t i = 0; i < nn; i++) {
+            const double f = hier_open_divisor(s, (uint32_t)i);
+            if (f != 1.0)
                 for (size_t b = 0; b < nb; b++)
-                    Bg[i * nb + b] /= s->open[i];
+                    Bg[i * nb + b] /= f;
+        }
     /* Push (sec. 4.2): parents come before their children in node order.
      * W temporarily marks nodes that some link reaches (theirs or an
      * ancestor's). */

@@ -49,14 +49,17 @@ void rp_hierarchical_stats(const void *state, rp_hier_stats *out);
 /* The leaf elements: returns their count and, for the first min(count, cap)
  * of them in a fixed order, fills those of area (scene units squared),
  * surface (scene surface index) and B (radiosity, nbands per leaf, W m^-2)
- * that are non-NULL. */
+ * that are non-NULL.  With --open-fraction (hier_open.c) B is the
+ * radiosity of the leaf's open part, so area x B overstates the power of
+ * a leaf partly enclosed by other geometry. */
 size_t rp_hierarchical_leaves(const void *state, double *area, uint32_t *surface, double *B,
                               size_t cap);
 
 /* The radiosity (nbands values, W m^-2) the solution holds at point p of
  * scene face `face` (of the scene solved on: with --simplify or --mesh
- * discontinuity not the scene given): the value of the leaf containing p,
- * or with --basis linear its linear function at p. */
+ * discontinuity not the scene given): the value of the leaf containing p
+ * (of its open part, hier_open.c), or with --basis linear its linear
+ * function at p. */
 void rp_hierarchical_radiosity_at(const void *state, uint32_t face, rp_vec3 p, double *B);
 
 /* The sum of the form factors that reach a leaf through the links of the

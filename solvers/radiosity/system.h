@@ -232,8 +232,8 @@ rp_status rp_rad_mesh_params(const char *method, const rp_options *o, rp_mesh_pa
                              rp_error *err);
 
 /* --mesh-segments N, the D1 segments the discontinuity mesh keeps per face
- * (RP_DISC_DEFAULT_MAX_PER_FACE when not given), into *segs; refused unless
- * the method meshes by discontinuities (disc).  Shared with hierarchical's
+ * (RP_DISC_DEFAULT_MAX_PER_FACE when not given), into *segs; ignored with a
+ * warning (o->log) unless the method meshes by discontinuities (disc).  Shared with hierarchical's
  * --mesh discontinuity start mesh. */
 rp_status rp_rad_mesh_segments(const char *method, const rp_options *o, int disc, unsigned long *segs,
                                rp_error *err);
