@@ -116,6 +116,23 @@ Test(cli, usage_errors_exit_2)
         cr_expect(r.err[0] != '\0', "'%s' says nothing on stderr", cases[i]);
         rp_run_free(&r);
     }
+    /* A count's message says what is wrong with it. */
+    const char *counts[][2] = {
+        {"render scenes/cornell.scene --method pathtrace --spp -4 -o @/x.exr", "'-4' is not a whole number in [1, "},
+        {"render scenes/cornell.scene --method pathtrace --spp 99999999999999999999 -o @/x.exr",
+         "99999999999999999999 is outside [1, "},
+        {"render scenes/cornell.scene --method pathtrace --spp 4x -o @/x.exr", "'4x' is not a whole number"},
+    };
+    for (size_t i = 0; i < sizeof counts / sizeof counts[0]; i++) {
+        char cmd[512], *at;
+        snprintf(cmd, sizeof cmd, "%s", counts[i][0]);
+        if ((at = strchr(cmd, '@')) != NULL)
+            snprintf(at, sizeof cmd - (size_t)(at - cmd), "%s/x.exr", dir);
+        rp_run r = rp_run_radpt(cmd);
+        cr_expect_eq(r.status, 2, "'%s' exited %d", counts[i][0], r.status);
+        cr_expect(strstr(r.err, counts[i][1]) != NULL, "'%s': %s", counts[i][0], r.err);
+        rp_run_free(&r);
+    }
     char out[64];
     snprintf(out, sizeof out, "%s/x.exr", dir);
     cr_expect(access(out, F_OK) != 0, "no output file from a refused run");
