@@ -446,7 +446,7 @@ static const rp_experiment experiments[] = {
               "samples) and radiosity curves flatten at their mesh's discretisation error",
      .quick = {1.0, 2, 256,
                "pathtrace:sampler=random,pathtrace,southwell:elements=150,southwell:elements=600,"
-               "hierarchical:bf-epsilon=0.05:min-area=1e-4,stochastic-jacobi"},
+               "hierarchical:bf-epsilon=0.1:min-area=1e-3,stochastic-jacobi"},
      .full = {6.0, 3, 2048,
               "pathtrace:sampler=random,pathtrace,southwell:elements=250,southwell:elements=1000,"
               "gauss-seidel:elements=1000:reconstruct=gouraud,hierarchical,stochastic-jacobi"},
