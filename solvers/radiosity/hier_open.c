@@ -16,11 +16,11 @@
  * Here each node's open fraction f is measured once, in the step that
  * makes the node, after refinement (hier_open_update): a grid of points on
  * it, each enclosed when every one of a few fixed rays from it lands on
- * the back of a face (the inside of the box);
- * a node whose coarse grid is neither all open nor all enclosed is
- * measured again on a fine grid.  The gather divides what a node gathers
- * by its f, so its value is that of its open part (what the camera and
- * other elements see); the pull weighs a leaf by its open area, and a
+ * the back of a face (the inside of the box); a node whose coarse grid is
+ * neither all open nor all enclosed is measured again on a fine grid.  The
+ * gather divides what a node gathers by its f (not less than OPEN_MIN),
+ * so its value is that of its open part (what the camera and other
+ * elements see); the pull weighs a leaf by its open area, and a
  * surface's average counts the enclosed part as emission only
  * (hier_surfaces).  In an enclosure the row sums already do this (the
  * leaf's form factors sum to f, update_scale), and the linear basis keeps
