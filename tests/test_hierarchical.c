@@ -800,7 +800,8 @@ Test(hier, open_fraction_an_overhang_is_open, .init = hsetup)
     rp_scene *scene = rp_test_parse("bands grey\nmaterial floor reflect 0.5\nmaterial lamp reflect 0 emit 3\n"
                                     "material black reflect 0\n"
                                     "quad receiver floor  0 0 0  1 0 0  1 1 0  0 1 0\n"
-                                    "quad shelf black  0.375 -0.1 0.05  0.625 -0.1 0.05  0.625 1.1 0.05  0.375 1.1 0.05\n"
+                                    "quad shelf black  0.375 -0.1 0.05  0.625 -0.1 0.05  "
+                                    "0.625 1.1 0.05  0.375 1.1 0.05\n"
                                     "quad emitter lamp  0 0 0.4  0 1 0.4  1 1 0.4  1 0 0.4\n");
     hrun r;
     const char *kv[] = {"bf-epsilon", "0", "min-area", "0.005", NULL};

@@ -77,8 +77,9 @@ static const rp_option_spec hier_options[] = {
      "(refined towards a penumbra they may hide, then dropped)",
      "0.25"},
     {"vis-rays", "N",
-     "visibility rays per set (rounded to a square, at most 64); a link the oracle keeps casts two independent sets, "
-     "one to decide its refinement and one for the visibility it keeps, so that shadows are unbiased",
+     "visibility rays per set (rounded to a square, at most 64); a link the oracle keeps casts two "
+     "independent sets, one to decide its refinement and one for the visibility it keeps, so that "
+     "shadows are unbiased",
      "16"},
     {"tolerance", "EPS",
      "stop when a sweep changes the energy by less than EPS (relative, worst band) and no link "
@@ -664,8 +665,8 @@ static void source_radiosity(const hier_state *s, hier_link *l, double *out) { s
  * Returns the relative energy change. */
 /* Push-pull's pull to parent node nd: the mean of its children's values X
  * (nb each) weighted by W (the open area, hier_open.c, each child's
- * reached leaves hold; by area when none is reached) into Xi, the four weights into wc (NULL: not
- * wanted); returns the parent's weight. */
+ * reached leaves hold; by area when none is reached) into Xi, the four
+ * weights into wc (NULL: not wanted); returns the parent's weight. */
 static double pull_children(const hier_state *s, const hier_node *nd, const double *W, const double *X, double *Xi,
                             double wc[4])
 {
