@@ -269,19 +269,24 @@ static double link_rays_cast(const hier_state *s, const link_rays *r, uint64_t k
     return *valid ? (wsum > 0 ? wopen / wsum : (double)*open / *valid) : 0.0;
 }
 
-/* The second, independent set of visibility rays of link l (the value's,
- * see link_eval), whose unoccluded form factor is F: l->F = F x the
- * visible fraction.  Returns that fraction. */
-static double link_value(const hier_state *s, hier_link *l, double F, double *rays)
+/* The visible fraction from the second, independent set of rays of the
+ * link q <- p prepared in *set: the value's (see link_eval). */
+static double value_rays(const hier_state *s, const link_rays *set, const hier_node *q, const hier_node *p,
+                         double *rays)
+{
+    unsigned open = 0, valid = 0;
+    return link_rays_cast(s, set, hier_key(s->seed ^ HIER_VALUE_KEY, q->id, p->id), &open, &valid, rays);
+}
+
+/* Completes a link link_eval left pending, whose unoccluded form factor
+ * is F: l->F = F x the value's visible fraction. */
+static void link_value(const hier_state *s, hier_link *l, double F, double *rays)
 {
     const hier_node *q = &s->nodes[l->recv], *p = &s->nodes[l->src];
     link_rays set;
     link_rays_prepare(&set, q, p, &s->faces[q->face], &s->faces[p->face], (l->flags & HIER_LINK_STRADDLE) != 0);
-    unsigned open = 0, valid = 0;
-    double vis = link_rays_cast(s, &set, hier_key(s->seed ^ HIER_VALUE_KEY, q->id, p->id), &open, &valid, rays);
-    l->F = (float)(F * vis);
+    l->F = (float)(F * value_rays(s, &set, q, p, rays));
     l->flags = (uint16_t)(l->flags & ~HIER_LINK_PENDING);
-    return vis;
 }
 
 /* Evaluates link q <- p into *out.  Returns 0 if there is no link (the two
@@ -410,11 +415,10 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
                 flags |= HIER_LINK_PARTIAL;
             if (open == 0)
                 flags |= HIER_LINK_INVISIBLE;
-            out->flags = (uint16_t)flags;
             if (defer)
                 flags |= HIER_LINK_PENDING;
             else
-                vis = link_value(s, out, F, rays);
+                vis = value_rays(s, &set, q, p, rays);
         }
     }
     out->share[0] = out->share[1] = out->share[2] = 0;

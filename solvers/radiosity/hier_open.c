@@ -60,20 +60,27 @@
 
 /* 1 if every ray from point x (on a face with normal n) lands on the back
  * of a face; k turns the rings from point to point. */
+static int ray_enclosed(const hier_state *s, rp_vec3 x, rp_vec3 n, rp_vec3 dir, double *rays)
+{
+    rp_hit hit;
+    *rays += 1;
+    return rp_ray_closest_from(s->rc, x, n, dir, &hit) && !hit.front;
+}
+
 static int point_enclosed(const hier_state *s, rp_vec3 x, rp_vec3 n, int k, double *rays)
 {
+    static const double theta[2] = {1.0, 1.4};
     rp_vec3 t, b;
     rp_v3_basis(n, &t, &b);
-    for (int d = 0; d < 1 + 2 * OPEN_RING; d++) {
-        rp_vec3 dir = n;
-        if (d > 0)
-            dir = hier_ring_dir(n, t, b, d <= OPEN_RING ? 1.0 : 1.4,
-                                2 * RP_PI * ((d - 1) % OPEN_RING + (d > OPEN_RING ? 0.5 : 0)) / OPEN_RING + 0.9 * k);
-        rp_hit hit;
-        *rays += 1;
-        if (!rp_ray_closest_from(s->rc, x, n, dir, &hit) || hit.front)
-            return 0;
-    }
+    if (!ray_enclosed(s, x, n, n, rays))
+        return 0;
+    /* the second ring half a step round from the first */
+    for (int r = 0; r < 2; r++)
+        for (int j = 0; j < OPEN_RING; j++) {
+            double phi = 2 * RP_PI * (j + 0.5 * r) / OPEN_RING + 0.9 * k;
+            if (!ray_enclosed(s, x, n, hier_ring_dir(n, t, b, theta[r], phi), rays))
+                return 0;
+        }
     return 1;
 }
 
