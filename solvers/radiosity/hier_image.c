@@ -333,7 +333,7 @@ static void node_changes(const hier_state *s, uint32_t a, rp_vec3 x, rp_vec3 n, 
 static void leaf_value(const hier_state *s, uint32_t i, double dF, const double *dg, double *out)
 {
     const hier_face *f = &s->faces[s->nodes[i].face];
-    const double scale = s->enclosure ? s->ff_scale[i] : 1.0;
+    const double scale = hier_row_scale(s, i);
     double sx = scale;
     if (s->enclosure)
         sx = 1.0 / scale + dF > 0 ? 1.0 / (1.0 / scale + dF) : scale;

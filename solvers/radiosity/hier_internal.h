@@ -221,7 +221,9 @@ typedef struct hier_state {
      * enclosure is 1 when every ray leaving a front lands on a front, so
      * the exact form factors of any element sum to 1; ff_scale[i] is then
      * 1 / (the form factors reaching leaf i through its own and its
-     * ancestors' links), 1 elsewhere. */
+     * ancestors' links).  With open fractions (open_on) it caps that sum,
+     * each node's own part divided by its divisor, at 1 (update_scale);
+     * otherwise it is not allocated (hier_row_scale). */
     int enclosure;
     double *ff_scale;
     double *ff_lin;      /* --basis linear: nnodes x 2, the linear part of
@@ -383,6 +385,14 @@ double hier_open_fraction(const hier_state *s, uint32_t i);
 /* What node i's gathered radiosity is divided by: its open fraction, but
  * not less than the resolution of a link's rays (hier_open.c). */
 double hier_open_divisor(const hier_state *s, uint32_t i);
+
+/* The factor leaf i's gathered radiosity is multiplied by: the row-sum
+ * normalisation of an enclosure or the cap of open fractions
+ * (hierarchical.c update_scale), 1 where neither applies. */
+static inline double hier_row_scale(const hier_state *s, size_t i)
+{
+    return s->enclosure || s->open_on ? s->ff_scale[i] : 1.0;
+}
 
 /* The direction theta radians off unit normal n, at azimuth phi about it
  * in the frame (t, b) of rp_v3_basis(n): the rings of fixed rays that

@@ -320,7 +320,7 @@ static int scene_is_enclosure(const hier_state *s)
 
 /* For every node, the form factors reaching it through its own links and
  * its ancestors' (what push-pull hands a leaf): sum[i], nnodes entries. */
-static void chain_sums(const hier_state *s, double *sum)
+static void chain_sums(const hier_state *s, double *sum, int divide)
 {
     for (size_t i = 0; i < s->nnodes; i++) {
         const hier_node *nd = &s->nodes[i];
@@ -330,9 +330,39 @@ static void chain_sums(const hier_state *s, double *sum)
                 own += s->links[k].F;
         if (s->cl_nff && i < s->cl_nn)
             own += s->cl_nff[i]; /* cluster-link entries it receives (hier_cluster.c) */
+        if (divide)
+            own /= hier_open_divisor(s, (uint32_t)i); /* as hier_sweep divides what it gathers */
         double up = nd->parent != RP_NONE ? sum[nd->parent] : 0;
         sum[i] = own + up;
     }
+}
+
+/* Where open fractions divide what a node gathers (hier_open.c), a cap
+ * on each leaf's divided row sum.  The form factors from the open part of
+ * an element sum to at most 1 (the summation relation), so the division
+ * may raise a leaf's sum up to 1, or up to its undivided sum where the
+ * hierarchy's estimate already exceeds 1 (by up to 22% on the Cornell box
+ * at the defaults), and no further.  A divided sum above both is an open
+ * fraction measured too small: rays that start inside other geometry (a
+ * large --ray-offset) find a point enclosed whose links' rays, or links
+ * without rays, still carry light.  Such a leaf is scaled back to the
+ * cap.  Without it the division amplified what those leaves gathered by up
+ * to 16, and a furnace's solution grew past 1e300 (the stability study's
+ * thin slab at --ray-offset 1e-2). */
+static rp_status open_row_caps(hier_state *s, rp_error *err)
+{
+    double *plain = malloc((s->nnodes ? s->nnodes : 1) * sizeof *plain);
+    if (!plain)
+        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for row sums");
+    double *sum = s->ff_scale;
+    chain_sums(s, plain, 0);
+    chain_sums(s, sum, 1);
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const double cap = hier_max(plain[i], 1.0);
+        sum[i] = sum[i] > cap ? cap / sum[i] : 1.0;
+    }
+    free(plain);
+    return RP_OK;
 }
 
 /* Row-sum normalisation in an enclosure.  A leaf gathers through its own
@@ -346,10 +376,11 @@ static void chain_sums(const hier_state *s, double *sum)
  * closed environment: a uniform enclosure (the furnace) is then solved
  * exactly, L = Le / (1 - rho) on every leaf, refined or not, and any
  * enclosure conserves energy leaf by leaf.  Open scenes are left alone
- * (their exact row sums are below 1 and not known). */
+ * (their exact row sums are below 1 and not known), but for the cap of
+ * open fractions (open_row_caps). */
 static rp_status update_scale(hier_state *s, rp_error *err)
 {
-    if (!s->enclosure)
+    if (!s->enclosure && !s->open_on)
         return RP_OK;
     if (s->cap_scale < s->nnodes) {
         double *a = realloc(s->ff_scale, s->cap_nodes * sizeof *a);
@@ -380,7 +411,9 @@ static rp_status update_scale(hier_state *s, rp_error *err)
         }
         return RP_OK;
     }
-    chain_sums(s, sum);
+    if (!s->enclosure)
+        return open_row_caps(s, err);
+    chain_sums(s, sum, 0);
     for (size_t i = 0; i < s->nnodes; i++)
         sum[i] = sum[i] > 0 ? 1.0 / sum[i] : 1.0;
     return RP_OK;
@@ -771,7 +804,7 @@ static double hier_sweep(hier_state *s)
         double *Bi = B + i * nb;
         if (nd->child == RP_NONE) {
             const double *Le = s->faces[nd->face].Le;
-            const double scale = s->enclosure ? s->ff_scale[i] : 1.0;
+            const double scale = hier_row_scale(s, i);
             int emits = 0;
             for (size_t b = 0; b < nb; b++) {
                 double v = RP_PI * Le[b] + scale * (Bg[i * nb + b] + Bd[i * nb + b]);
@@ -927,7 +960,7 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
     refined += crefined;
     if (s->linear && (st = hier_linear_links(s, err)) != RP_OK)
         return st;
-    if ((st = update_scale(s, err)) != RP_OK || (st = hier_open_update(s, err)) != RP_OK)
+    if ((st = hier_open_update(s, err)) != RP_OK || (st = update_scale(s, err)) != RP_OK)
         return st;
     if (s->importance != HIER_IMP_NONE) {
         /* Importance and radiosity alternate (Smits et al. 1992): one
@@ -1036,7 +1069,7 @@ size_t rp_hierarchical_leaf_form_factor_sums(const void *state, double *sums, si
     const hier_state *s = state;
     double *sum = malloc((s->nnodes ? s->nnodes : 1) * sizeof *sum);
     if (sum)
-        chain_sums(s, sum);
+        chain_sums(s, sum, s->open_on);
     size_t n = 0;
     for (size_t i = 0; i < s->nnodes; i++) {
         if (s->nodes[i].child != RP_NONE)
