@@ -411,6 +411,7 @@ size_t hier_bytes(const hier_state *s)
         b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit);
     b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face) + s->cap_open * sizeof(double);
+    b += s->ff_scale ? s->cap_scale * sizeof(double) : 0; /* row sums (update_scale) */
     if (s->linear)
         b += s->cap_nodes * (sizeof(hier_basis) + 6 * s->nb * sizeof(double)) + s->cap_lin_K * 8 * sizeof(float) +
              (s->ff_lin ? 2 * s->cap_scale * sizeof(double) : 0);
