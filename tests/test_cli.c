@@ -195,6 +195,15 @@ Test(cli, render_writes_exr_with_metadata_and_fails_cleanly)
         if (strstr(buf, "channels")) {
             cr_expect(strstr(buf, "Y, 32-bit floating-point") != NULL, "%s", buf);
             cr_expect(strstr(buf, "radpt:seed") && strstr(buf, "radpt:method"), "%s", buf);
+            /* the options given, and every other one at its default */
+            const char *o = strstr(buf, "radpt:options"), *d = strstr(buf, "radpt:defaults");
+            cr_assert(o && d, "%s", buf);
+            char line[512];
+            snprintf(line, sizeof line, "%.*s", (int)strcspn(o, "\n"), o);
+            cr_expect(strstr(line, "\"--spp 2\""), "%s", line);
+            snprintf(line, sizeof line, "%.*s", (int)strcspn(d, "\n"), d);
+            cr_expect(strstr(line, "--sampler sobol") && strstr(line, "--max-depth unlimited"), "%s", line);
+            cr_expect_null(strstr(line, "--spp"), "a given option among the defaults: %s", line);
         }
     }
     unlink("/tmp/rp_cli_furnace.exr");

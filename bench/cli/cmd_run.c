@@ -195,6 +195,24 @@ static void options_text(const rp_cli *cli, char *buf, size_t n)
                                  cli->values[i]);
 }
 
+/* The method's options left at their defaults, as "--name value" words
+ * (radpt:defaults): with radpt:options, every setting the run used. */
+static void defaults_text(const rp_cli *cli, char *buf, size_t n)
+{
+    buf[0] = '\0';
+    const rp_solver_type *t = rp_solver_lookup(cli->method);
+    size_t used = 0;
+    for (const rp_option_spec *o = t ? t->options : NULL; o && o->name && used < n; o++) {
+        if (!o->fallback || !o->arg)
+            continue;
+        int given = 0;
+        for (size_t i = 0; i < cli->noptions && !given; i++)
+            given = strcmp(cli->keys[i], o->name) == 0;
+        if (!given)
+            used += (size_t)snprintf(buf + used, n - used, "%s--%s %s", used ? " " : "", o->name, o->fallback);
+    }
+}
+
 /* Channel names and planes for a scene's bands (docs/design.md, "Images"). */
 typedef struct image_planes {
     size_t nchannels;
@@ -398,8 +416,8 @@ int rp_cmd_render(int argc, char **argv)
     if (st != RP_OK)
         goto done;
 
-    char hash[17], seed[32], samples[32], seconds[32], threads[16], rays[32], optstr[1024], residual[32],
-        tolerance[32];
+    char hash[17], seed[32], samples[32], seconds[32], threads[16], rays[32], optstr[1024], defstr[2048],
+        residual[32], tolerance[32];
     rp_scene_hash(scene, hash);
     snprintf(seed, sizeof seed, "%llu", (unsigned long long)cli.seed);
     snprintf(samples, sizeof samples, "%.17g", est.samples);
@@ -407,13 +425,15 @@ int rp_cmd_render(int argc, char **argv)
     snprintf(threads, sizeof threads, "%d", cli.threads ? cli.threads : omp_get_max_threads());
     snprintf(rays, sizeof rays, "%.17g", tot.sum.rays);
     options_text(&cli, optstr, sizeof optstr);
+    defaults_text(&cli, defstr, sizeof defstr);
     snprintf(residual, sizeof residual, "%.17g", conv.residual);
     snprintf(tolerance, sizeof tolerance, "%.17g", conv.tolerance);
     /* The convergence attributes come last, only for methods with a
      * residual and a tolerance. */
     rp_image_attr attrs[] = {
         {"radpt:scene", cli.scene}, {"radpt:scene_hash", hash}, {"radpt:method", cli.method},
-        {"radpt:options", optstr},  {"radpt:seed", seed},       {"radpt:samples", samples},
+        {"radpt:options", optstr},  {"radpt:defaults", defstr}, {"radpt:seed", seed},
+        {"radpt:samples", samples},
         {"radpt:seconds", seconds}, {"radpt:threads", threads}, {"radpt:rays", rays},
         {"radpt:interrupted", interrupted ? "yes" : "no"},
         {"radpt:converged", conv.converged ? "yes" : "no"}, {"radpt:residual", residual},
