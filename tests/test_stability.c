@@ -270,9 +270,11 @@ Test(stability, quick_atlas, .timeout = 240)
      * leaks: some surface loses over 20%; with the panel given a thickness
      * and the default offset the path tracer's and Gauss-Seidel's means are
      * within 1%.  No method gains light at any offset: a leak only loses
-     * it, so no surface rises above the closed form by more than noise
-     * (+0.1, five times the largest positive error seen, 0.019; hierarchical
-     * radiosity's open fractions once grew past 1e300 at offset 1e-2) */
+     * it, so the surface with the largest |error| is not one above the
+     * closed form by more than noise (+0.1, five times the largest positive
+     * error seen, 0.019; hierarchical radiosity's open fractions once read
+     * +9.5e298 at offset 1e-2).  A smaller gain beside a larger loss is not
+     * seen by this column. */
     c = csv_read(dir, "acne.csv");
     size_t csc = col(c, "scene"), coff = col(c, "ray_offset_rel"), cam = col(c, "method"), cref = col(c, "refused"),
            cmean = col(c, "mean_signed_error"), cworst = col(c, "worst_signed_error");

@@ -294,8 +294,8 @@ static double point_visibility(const hier_state *s, rp_vec3 x, rp_vec3 n, const 
  *
  *     B_i = pi Le + s_i (rho sum_links F_l B_l + C),
  *
- * C what clusters above hand down, s_i the enclosure's row-sum scale
- * (hierarchical.c).  At x each link's form factor is replaced by the exact
+ * C what clusters above hand down, s_i the leaf's row scale (hier_row_scale:
+ * an enclosure's row-sum normalisation or the open fractions' cap).  At x each link's form factor is replaced by the exact
  * point-to-polygon one, F_l(x) (times the visible fraction seen from x,
  * point_visibility, for links whose rays were partly blocked), and s by
  * 1 / (sum F_l(x) + the rest of the leaf's row sum), so the light keeps
@@ -329,7 +329,8 @@ static void node_changes(const hier_state *s, uint32_t a, rp_vec3 x, rp_vec3 n, 
 /* Leaf i's radiosity at a point where its chain of links changes the row
  * sum by dF and the gathered sum by dg (node_changes): B_i = E + s_i G
  * with G = rho sum F_l B_l + C, so there E + s_x (G + rho dg), s_x the
- * enclosure's row-sum scale 1 / (1 / s_i + dF) (1 in open scenes). */
+ * enclosure's row-sum scale 1 / (1 / s_i + dF) (elsewhere s_i itself: the
+ * open fractions' cap, 1 for an uncapped leaf, is kept as it is). */
 static void leaf_value(const hier_state *s, uint32_t i, double dF, const double *dg, double *out)
 {
     const hier_face *f = &s->faces[s->nodes[i].face];

@@ -222,7 +222,8 @@ typedef struct hier_state {
      * the exact form factors of any element sum to 1; ff_scale[i] is then
      * 1 / (the form factors reaching leaf i through its own and its
      * ancestors' links).  With open fractions (open_on) it caps that sum,
-     * each node's own part divided by its divisor, at 1 (update_scale);
+     * each node's own part divided by its divisor, at 1 or at the undivided
+ * sum if larger (hierarchical.c open_row_caps);
      * otherwise it is not allocated (hier_row_scale). */
     int enclosure;
     double *ff_scale;

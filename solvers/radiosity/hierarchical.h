@@ -67,7 +67,7 @@ void rp_hierarchical_radiosity_at(const void *state, uint32_t face, rp_vec3 p, d
  * order of rp_hierarchical_leaves; returns the leaf count.  In a closed
  * enclosure with every pair visible the exact sum is 1.  With open
  * fractions each node's own form factors are divided by its divisor, as
- * the sweep divides what it gathers. */
+ * the sweep divides what it gathers (before the sweep's cap, open_row_caps). */
 size_t rp_hierarchical_leaf_form_factor_sums(const void *state, double *sums, size_t cap);
 
 /* 1 if the scene was found to be an enclosure seen from inside (closed,
