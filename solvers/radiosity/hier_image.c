@@ -295,9 +295,10 @@ static double point_visibility(const hier_state *s, rp_vec3 x, rp_vec3 n, const 
  *     B_i = pi Le + s_i (rho sum_links F_l B_l + C),
  *
  * C what clusters above hand down, s_i the leaf's row scale (hier_row_scale:
- * an enclosure's row-sum normalisation or the open fractions' cap).  At x each link's form factor is replaced by the exact
- * point-to-polygon one, F_l(x) (times the visible fraction seen from x,
- * point_visibility, for links whose rays were partly blocked), and s by
+ * an enclosure's row-sum normalisation or the open fractions' cap).  At x
+ * each link's form factor is replaced by the exact point-to-polygon one,
+ * F_l(x) (times the visible fraction seen from x, point_visibility, for
+ * links whose rays were partly blocked), and s by
  * 1 / (sum F_l(x) + the rest of the leaf's row sum), so the light keeps
  * the shape of the kernel (the ramp of direct light under the ceiling, the
  * fall into a corner) below the size of the links.  node_changes sums one

@@ -223,8 +223,8 @@ typedef struct hier_state {
      * 1 / (the form factors reaching leaf i through its own and its
      * ancestors' links).  With open fractions (open_on) it caps that sum,
      * each node's own part divided by its divisor, at 1 or at the undivided
- * sum if larger (hierarchical.c open_row_caps);
-     * otherwise it is not allocated (hier_row_scale). */
+     * sum if larger (hierarchical.c open_row_caps); otherwise it is not
+     * allocated (hier_row_scale). */
     int enclosure;
     double *ff_scale;
     double *ff_lin;      /* --basis linear: nnodes x 2, the linear part of

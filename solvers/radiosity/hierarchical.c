@@ -318,22 +318,31 @@ static int scene_is_enclosure(const hier_state *s)
     return 1;
 }
 
+/* The form factors node i gathers through its own links and the
+ * cluster-link entries it receives (hier_cluster.c). */
+static double own_sum(const hier_state *s, size_t i)
+{
+    double own = 0;
+    if (s->link_start)
+        for (uint32_t k = s->link_start[i]; k < s->link_start[i + 1]; k++)
+            own += s->links[k].F;
+    if (s->cl_nff && i < s->cl_nn)
+        own += s->cl_nff[i];
+    return own;
+}
+
 /* For every node, the form factors reaching it through its own links and
- * its ancestors' (what push-pull hands a leaf): sum[i], nnodes entries. */
+ * its ancestors' (what push-pull hands a leaf): sum[i], nnodes entries;
+ * with divide, each node's own part divided by its open-fraction divisor,
+ * as hier_sweep divides what it gathers. */
 static void chain_sums(const hier_state *s, double *sum, int divide)
 {
     for (size_t i = 0; i < s->nnodes; i++) {
         const hier_node *nd = &s->nodes[i];
-        double own = 0;
-        if (s->link_start)
-            for (uint32_t k = s->link_start[i]; k < s->link_start[i + 1]; k++)
-                own += s->links[k].F;
-        if (s->cl_nff && i < s->cl_nn)
-            own += s->cl_nff[i]; /* cluster-link entries it receives (hier_cluster.c) */
+        double own = own_sum(s, i);
         if (divide)
-            own /= hier_open_divisor(s, (uint32_t)i); /* as hier_sweep divides what it gathers */
-        double up = nd->parent != RP_NONE ? sum[nd->parent] : 0;
-        sum[i] = own + up;
+            own /= hier_open_divisor(s, (uint32_t)i);
+        sum[i] = own + (nd->parent != RP_NONE ? sum[nd->parent] : 0);
     }
 }
 
@@ -347,16 +356,21 @@ static void chain_sums(const hier_state *s, double *sum, int divide)
  * large --ray-offset) find a point enclosed whose links' rays, or links
  * without rays, still carry light.  Such a leaf is scaled back to the
  * cap.  Without it the division amplified what those leaves gathered by up
- * to 16, and a furnace's solution grew to 1e299 (a relative error of +9.5e298) (the stability study's
- * thin slab at --ray-offset 1e-2). */
+ * to 16, and a furnace's solution grew to about 1e299 (a relative error of
+ * +9.5e298; the stability study's thin slab at --ray-offset 1e-2).  Both
+ * chain sums, plain and divided, come from one pass over the links. */
 static rp_status open_row_caps(hier_state *s, rp_error *err)
 {
     double *plain = malloc((s->nnodes ? s->nnodes : 1) * sizeof *plain);
     if (!plain)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for row sums");
     double *sum = s->ff_scale;
-    chain_sums(s, plain, 0);
-    chain_sums(s, sum, 1);
+    for (size_t i = 0; i < s->nnodes; i++) {
+        const uint32_t parent = s->nodes[i].parent;
+        const double own = own_sum(s, i);
+        plain[i] = own + (parent != RP_NONE ? plain[parent] : 0);
+        sum[i] = own / hier_open_divisor(s, (uint32_t)i) + (parent != RP_NONE ? sum[parent] : 0);
+    }
     for (size_t i = 0; i < s->nnodes; i++) {
         const double cap = hier_max(plain[i], 1.0);
         sum[i] = sum[i] > cap ? cap / sum[i] : 1.0;
