@@ -270,20 +270,24 @@ Test(stability, quick_atlas, .timeout = 240)
      * leaks: some surface loses over 20%; with the panel given a thickness
      * and the default offset the path tracer's and Gauss-Seidel's means are
      * within 1%.  No method gains light at any offset: a leak only loses
-     * it, so the surface with the largest |error| is not one above the
-     * closed form by more than noise (+0.1, five times the largest positive
-     * error seen, 0.019; hierarchical radiosity's open fractions once read
-     * +9.5e298 at offset 1e-2).  A smaller gain beside a larger loss is not
-     * seen by this column. */
+     * it, so no surface (max_signed_error: the largest gain, whether or
+     * not it is the largest |error|) is above the closed form by more than
+     * 0.1 (three times the largest gain of a deterministic method seen,
+     * hierarchical radiosity's +0.034 at offset 1e-2; its open fractions
+     * once read +9.5e298 there) plus four of that surface's standard
+     * errors (max_standard_error: 0 for the deterministic methods;
+     * stochastic Jacobi's small panel sides carry up to 0.13 at --quick). */
     c = csv_read(dir, "acne.csv");
     size_t csc = col(c, "scene"), coff = col(c, "ray_offset_rel"), cam = col(c, "method"), cref = col(c, "refused"),
-           cmean = col(c, "mean_signed_error"), cworst = col(c, "worst_signed_error");
+           cmean = col(c, "mean_signed_error"), cworst = col(c, "worst_signed_error"),
+           cgain = col(c, "max_signed_error"), cgse = col(c, "max_standard_error");
     int acne = 0, clean = 0, leak = 0;
     for (size_t r = 1; r < c->nrows; r++) {
         if (num(c, r, cref))
             continue;
-        cr_expect_lt(num(c, r, cworst), 0.1, "%s %s at offset %g: worst %g", c->row[r][csc], c->row[r][cam],
-                     num(c, r, coff), num(c, r, cworst));
+        cr_expect_lt(num(c, r, cgain), 0.1 + 4 * num(c, r, cgse), "%s %s at offset %g: largest gain %g +- %g",
+                     c->row[r][csc], c->row[r][cam], num(c, r, coff), num(c, r, cgain), num(c, r, cgse));
+        cr_expect_leq(num(c, r, cworst), num(c, r, cgain), "the largest |error| is not above the largest gain");
         if (!strcmp(c->row[r][csc], "thin-coincident") && num(c, r, coff) == 0)
             for (size_t q = 1; q < c->nrows; q++)
                 if (!strcmp(c->row[q][csc], "thin-coincident") && num(c, q, coff) == 1e-5 &&

@@ -48,8 +48,9 @@ typedef struct stab {
     char gp_note[256];
 } stab;
 
-/* Prints v with fmt; a non-finite v is written as NONFINITE and counted
- * (the experiment then fails). */
+/* Prints v with fmt (one conversion of a double); a non-finite v is
+ * written as NONFINITE in the conversion's place, with fmt's text around
+ * it (the csv separators), and counted (the experiment then fails). */
 static void put(stab *S, FILE *f, const char *fmt, double v, const char *what)
 {
     /* in the hand-out pass the units of other ranks are NaN, and nothing
@@ -58,7 +59,10 @@ static void put(stab *S, FILE *f, const char *fmt, double v, const char *what)
         fprintf(f, fmt, v);
         return;
     }
-    fputs("NONFINITE", f);
+    const char *pc = strchr(fmt, '%');
+    size_t pre = pc ? (size_t)(pc - fmt) : strlen(fmt);
+    const char *post = pc ? pc + 1 + strcspn(pc + 1, "eEfFgGaA") : fmt + pre;
+    fprintf(f, "%.*sNONFINITE%s", (int)pre, fmt, *post ? post + 1 : post);
     if (!S->nonfinite++)
         snprintf(S->first_bad, sizeof S->first_bad, "%s", what);
 }
@@ -1801,7 +1805,7 @@ static rp_status sec_acne(stab *S, rp_error *err)
     const size_t nm = sizeof M / sizeof M[0];
     typedef struct arow {
         double off;
-        double mean_err[4], worst_err[4];
+        double mean_err[4], worst_err[4], max_err[4], max_se[4];
         char worst_name[4][32];
         int failed[4];
         char msg[4][400];
@@ -1838,9 +1842,12 @@ static rp_status sec_acne(stab *S, rp_error *err)
             }
             double mean = 0, worst = -1;
             size_t wi = 0;
+            size_t gi = 0;
             for (size_t i = 0; i < r.ns; i++) {
                 double e = (r.surf[i] - L) / L;
                 mean += surfs[i].area * e;
+                if (e > (r.surf[gi] - L) / L)
+                    gi = i;
                 if (fabs(e) > worst) {
                     worst = fabs(e);
                     wi = i;
@@ -1848,6 +1855,8 @@ static rp_status sec_acne(stab *S, rp_error *err)
             }
             rows[k].mean_err[m] = mean / area;
             rows[k].worst_err[m] = (r.surf[wi] - L) / L;
+            rows[k].max_err[m] = (r.surf[gi] - L) / L;
+            rows[k].max_se[m] = r.se ? r.se[gi] / L : 0;
             snprintf(rows[k].worst_name[m], sizeof rows[k].worst_name[m], "%s", surfs[wi].name);
             srun_free(&r);
         }
@@ -1872,19 +1881,22 @@ static rp_status sec_acne(stab *S, rp_error *err)
     rp_out o;
     if ((st = rp_out_open(&o, out_path(S, path, sizeof path, "acne.csv"), err)) != RP_OK)
         return st;
-    fputs("scene,ray_offset_rel,ray_offset_max,method,refused,mean_signed_error,worst_signed_error,worst_surface\n",
+    fputs("scene,ray_offset_rel,ray_offset_max,method,refused,mean_signed_error,worst_signed_error,worst_surface,"
+          "max_signed_error,max_standard_error\n",
           o.f);
     for (size_t k = 0; k <= no; k++)
         for (size_t m = 0; m < nm; m++) {
             fprintf(o.f, "%s,%g,%g,%s,%d,", k < no ? "thin-coincident" : "thin-separated", rows[k].off,
                     rows[k].off * hmax, M[m].label, rows[k].failed[m]);
             if (rows[k].failed[m]) {
-                fputs(",,\n", o.f);
+                fputs(",,,,\n", o.f);
                 continue;
             }
             put(S, o.f, "%.6g,", rows[k].mean_err[m], "acne mean");
             put(S, o.f, "%.6g,", rows[k].worst_err[m], "acne worst");
-            fprintf(o.f, "%s\n", rows[k].worst_name[m]);
+            fprintf(o.f, "%s,", rows[k].worst_name[m]);
+            put(S, o.f, "%.6g,", rows[k].max_err[m], "acne gain");
+            put(S, o.f, "%.6g\n", rows[k].max_se[m], "acne gain's standard error");
         }
     if ((st = rp_out_close(&o, 1, err)) != RP_OK)
         return st;
@@ -1918,7 +1930,7 @@ static rp_status sec_acne(stab *S, rp_error *err)
                "centre of the lit faces' box, so at most offset x %.4g here; default 1e-5; hits on faces whose "
                "plane holds p are rejected at every offset). Errors are relative, signed (negative = light lost); "
                "worst = the surface with the largest "
-               "|error|. The hemicube form factors cast no visibility rays (they rasterise with their own "
+               "|error| (acne.csv also gives each run's largest gain, max_signed_error, with that surface's relative standard error, 0 for the deterministic methods). The hemicube form factors cast no visibility rays (they rasterise with their own "
                "near-plane epsilon), so `--ray-offset` does not apply to them. jacobi, southwell and "
                "direct share gauss-seidel's raycaster and form factors (solvers/radiosity/system.c), so their "
                "visibility, and their leaks, are the same.\n\n![acne](acne.png)\n\n"

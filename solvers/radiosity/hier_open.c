@@ -34,11 +34,12 @@
  * crosses the side's plane, and its form factor and rays cover only the
  * part in front of the side (hier_link.c), the open part; any other source
  * is seen from the enclosed part only through the box's faces, which then
- * lie between the two and are tested.  Measured on the Cornell box: RMS
- * surface error 0.29% against 0.69% at the defaults, 1.42% against 1.81%
- * at --bf-epsilon 0.05 --min-area 1e-4 (image RMSE 0.00208 against
- * 0.00232, image mean -0.4 to -0.55% against -1.0 to -1.25%), for 8% more
- * rays (README.md). */
+ * lie between the two and are tested.  Measured on the Cornell box with
+ * the row-sum cap (hierarchical.c open_row_caps): RMS surface error 0.31%
+ * against 0.69% with --open-fraction off at the defaults, 1.41% against
+ * 1.81% at --bf-epsilon 0.05 --min-area 1e-4 (image RMSE 0.00208 against
+ * 0.00232, image mean -0.43 to -0.63% against -1.0 to -1.25%), for 8% more
+ * rays (README.md has the table and its commands). */
 #include <math.h>
 #include <stdlib.h>
 
