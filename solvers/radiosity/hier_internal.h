@@ -236,10 +236,8 @@ typedef struct hier_state {
     uint32_t *link_start; /* nnodes + 1 offsets into links (CSR by receiver) */
     size_t cap_start;
     size_t start_nn;     /* the node count link_start covers: every pass that
-                            makes nodes ends in links_adopt or
+                            makes nodes ends in links_merge or
                             hier_links_cover, before anything reads it */
-    hier_link *spare;    /* the previous list, reused by the next sort */
-    size_t cap_spare;
 
     /* Shaft culling (Haines & Wallace 1994): for each pair of faces, the
      * faces that may block a segment between them. */

@@ -409,7 +409,7 @@ size_t hier_bytes(const hier_state *s)
     size_t b = s->cap_nodes * (sizeof(hier_node) + ((s->Y ? 4 : 3) * s->nb + 1) * sizeof(double));
     if (s->Y)
         b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit);
-    b += (s->cap_links + s->cap_spare) * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
+    b += s->cap_links * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
     b += s->nfaces * sizeof(hier_face) + s->cap_open * sizeof(double);
     b += s->ff_scale ? s->cap_scale * sizeof(double) : 0; /* row sums (update_scale) */
     if (s->linear)

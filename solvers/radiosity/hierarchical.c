@@ -263,7 +263,6 @@ static void hier_fini(void *state)
     free(s->ff_scale);
     free(s->ff_lin);
     free(s->links);
-    free(s->spare);
     free(s->link_start);
     free(s->pair_off);
     free(s->pair_cnt);
