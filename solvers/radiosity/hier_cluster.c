@@ -710,14 +710,21 @@ static rp_status cluster_sums(hier_state *s, rp_error *err)
     s->cl_nn = nn;
     memset(s->cl_nff, 0, nn * sizeof *s->cl_nff);
     memset(s->cl_nreach, 0, nn);
-    const hier_centry *pools[2] = {s->cl_nent, s->cl_cent};
-    const size_t counts[2] = {s->ncl_nent, s->ncl_cent};
-    for (int p = 0; p < 2; p++)
-        for (size_t k = 0; k < counts[p]; k++)
-            if (pools[p][k].F != 0) {
-                s->cl_nff[pools[p][k].recv] += pools[p][k].F;
-                s->cl_nreach[pools[p][k].recv] = 1;
+    for (size_t k = 0; k < s->nclinks; k++) {
+        const hier_clink *l = &s->clinks[k];
+        if (!is_node(l->recv))
+            continue;
+        for (uint32_t j = 0; j < l->count; j++)
+            if (s->cl_nent[l->first + j].F != 0) {
+                s->cl_nff[l->recv] += s->cl_nent[l->first + j].F;
+                s->cl_nreach[l->recv] = 1;
             }
+    }
+    for (size_t k = 0; k < s->ncl_cent; k++)
+        if (s->cl_cent[k].F != 0) {
+            s->cl_nff[s->cl_cent[k].recv] += s->cl_cent[k].F;
+            s->cl_nreach[s->cl_cent[k].recv] = 1;
+        }
     return RP_OK;
 }
 
@@ -759,8 +766,20 @@ static void prune_entries(hier_state *s, size_t c, const uint64_t *rm, size_t nr
     }
 }
 
-/* Kills entries e[0..n) (their link or cluster drew new ones). */
+/* Kills entries e[0..n) (their cluster drew new ones). */
 static size_t kill_entries(hier_centry *e, size_t n)
+{
+    size_t d = 0;
+    for (size_t k = 0; k < n; k++)
+        if (e[k].F != 0) {
+            e[k].F = 0;
+            d++;
+        }
+    return d;
+}
+
+/* Kills a node-received link's entries e[0..n) (the link went). */
+static size_t kill_nentries(hier_nentry *e, size_t n)
 {
     size_t d = 0;
     for (size_t k = 0; k < n; k++)
@@ -834,7 +853,7 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl)
         }
         s->ncl_nent = at;
         s->ncl_ndead = 0;
-        pool_trim(&s->cl_nent, s->ncl_nent, &s->cap_cl_nent, NULL, NULL);
+        trim_to((void **)&s->cl_nent, &s->cap_cl_nent, s->ncl_nent + s->ncl_nent / 4 + 1024, sizeof *s->cl_nent);
     }
     if (4 * s->ncl_cdead > s->ncl_cent) {
         /* Clusters' ranges are not in pool order once some drew again:
@@ -934,8 +953,14 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
             l->first = (uint32_t)s->ncl_nent;
             l->count = cnt[i];
             l->Fu = 0;
-            if (!pool_append(&s->cl_nent, &s->ncl_nent, &s->cap_cl_nent, NULL, NULL, tmp + i * N, cnt[i]))
+            if (s->ncl_nent + cnt[i] > UINT32_MAX ||
+                !hier_grow((void **)&s->cl_nent, &s->cap_cl_nent, s->ncl_nent + cnt[i] + 1, sizeof *s->cl_nent))
                 goto nomem;
+            for (uint32_t j = 0; j < cnt[i]; j++) {
+                s->cl_nent[s->ncl_nent + j].src = tmp[i * N + j].e.src;
+                s->cl_nent[s->ncl_nent + j].F = tmp[i * N + j].e.F;
+            }
+            s->ncl_nent += cnt[i];
         }
         k0 = k1;
     }
@@ -1113,7 +1138,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
             if (!(l.Fu < 0)) {
                 /* A stored link goes: its receiver's entries go with it. */
                 if (is_node(l.recv))
-                    s->ncl_ndead += kill_entries(s->cl_nent + l.first, l.count);
+                    s->ncl_ndead += kill_nentries(s->cl_nent + l.first, l.count);
                 else {
                     dirty[l.recv & ~HIER_CL_BIT] |= 1;
                     if (!hier_grow((void **)&rm, &caprm, nrm + 1, sizeof *rm))
@@ -1265,19 +1290,33 @@ static void gather_entries(const hier_state *s, const double *X, int rho_of_src,
     if (!s->clustering)
         return;
     const size_t nb = s->nb;
-    const hier_centry *pools[2] = {s->cl_nent, s->cl_cent};
-    const size_t counts[2] = {s->ncl_nent, s->ncl_cent};
-    for (int p = 0; p < 2; p++)
-        for (size_t k = 0; k < counts[p]; k++) {
-            const hier_centry *e = &pools[p][k];
+    /* Node-received links in their order, which is the order of their
+     * entries in cl_nent (compact_pools, evaluate), then the clusters'. */
+    for (size_t k = 0; k < s->nclinks; k++) {
+        const hier_clink *l = &s->clinks[k];
+        if (!is_node(l->recv))
+            continue;
+        double *g = out + (size_t)l->recv * nb;
+        for (uint32_t j = 0; j < l->count; j++) {
+            const hier_nentry *e = &s->cl_nent[l->first + j];
             if (e->F == 0)
                 continue;
             const double *Xs = X + (size_t)e->src * nb;
-            const double *rho = s->faces[s->nodes[rho_of_src ? e->src : e->recv].face].rho;
-            double *g = out + (size_t)e->recv * nb;
+            const double *rho = s->faces[s->nodes[rho_of_src ? e->src : l->recv].face].rho;
             for (size_t b = 0; b < nb; b++)
                 g[b] += rho[b] * e->F * Xs[b];
         }
+    }
+    for (size_t k = 0; k < s->ncl_cent; k++) {
+        const hier_centry *e = &s->cl_cent[k];
+        if (e->F == 0)
+            continue;
+        const double *Xs = X + (size_t)e->src * nb;
+        const double *rho = s->faces[s->nodes[rho_of_src ? e->src : e->recv].face].rho;
+        double *g = out + (size_t)e->recv * nb;
+        for (size_t b = 0; b < nb; b++)
+            g[b] += rho[b] * e->F * Xs[b];
+    }
 }
 
 void hier_cluster_gather_nodes(hier_state *s, double *Bg) { gather_entries(s, s->B, 0, Bg); }

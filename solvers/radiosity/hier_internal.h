@@ -153,6 +153,14 @@ typedef struct hier_centry {
     float F;
 } hier_centry;
 
+/* An entry of a link received by a quadtree node: its receiver is the
+ * link's, so it is not stored (8 bytes, not 12: the bunny scene holds
+ * 1.3M of them). */
+typedef struct hier_nentry {
+    uint32_t src;
+    float F;
+} hier_nentry;
+
 /* Items at or above this id are clusters, below it quadtree nodes. */
 #define HIER_CL_BIT 0x80000000u
 /* Clustering is on above this many faces with --cluster auto. */
@@ -264,7 +272,9 @@ typedef struct hier_state {
                              it was drawn for (prune_entries; the entries of
                              a link a node receives need none) */
     size_t cap_cl_cvia;
-    hier_centry *cl_nent; /* entries of the links quadtree nodes receive, by link */
+    hier_nentry *cl_nent; /* entries of the links quadtree nodes receive, each
+                             link's in its range (first, count), the ranges
+                             in the order of the links in clinks */
     size_t ncl_nent, cap_cl_nent, ncl_ndead; /* (dead entries have F = 0) */
     double *cl_nff;      /* per node (cl_nn of them): form factors of the
                             cluster-link entries it receives */

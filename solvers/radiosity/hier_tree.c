@@ -418,7 +418,7 @@ size_t hier_bytes(const hier_state *s)
     if (s->clustering)
         b += s->ncl * (sizeof(hier_cluster) + 2 * s->nb * sizeof(double) + 2 * sizeof(uint32_t)) +
              s->nfaces * (3 * sizeof(uint32_t) + sizeof(double)) + s->cl_nn * (sizeof(double) + 1) +
-             s->cap_clinks * sizeof(hier_clink) + (s->cap_cl_cent + s->cap_cl_nent) * sizeof(hier_centry) + s->cap_cl_cvia * sizeof(uint32_t);
+             s->cap_clinks * sizeof(hier_clink) + s->cap_cl_cent * sizeof(hier_centry) + s->cap_cl_nent * sizeof(hier_nentry) + s->cap_cl_cvia * sizeof(uint32_t);
     if (s->cull)
         b += s->nfaces * s->nfaces * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t);
     return b;
