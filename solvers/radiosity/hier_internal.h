@@ -137,11 +137,15 @@ typedef struct hier_cluster {
  * its entries (first, count in cl_nent), the links received by a cluster
  * share the entries drawn for its faces (cl_efirst, cl_ecount). */
 typedef struct hier_clink {
-    uint32_t recv, src;    /* items */
-    float Fu;              /* unoccluded form-factor estimate (kernel only);
-                              -1 until the link is evaluated */
-    uint32_t first, count; /* node receivers: entries; count RP_NONE until
-                              evaluated */
+    uint32_t recv, src; /* items */
+    union {
+        float Fu;       /* cluster receivers: unoccluded form-factor
+                           estimate (kernel only), -1 until evaluated */
+        uint32_t first; /* node receivers: their entries in cl_nent */
+    };
+    uint32_t count;     /* node receivers: how many entries; RP_NONE until
+                           the link is evaluated (any receiver), then 0 for
+                           a cluster receiver */
 } hier_clink;
 
 /* One sampled piece of cluster-link transfer: node recv (a quadtree node,
@@ -346,6 +350,8 @@ rp_status hier_nodes_init(hier_state *s, rp_error *err);
 /* Gives node i four children (no-op if it has them); their radiosity
  * starts at the parent's. */
 rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err);
+/* Gives back the per-node arrays' room beyond the nodes (an idle pass). */
+void hier_nodes_trim(hier_state *s);
 /* A point on a node from (u1, u2) in [0, 1)^2, uniform in area for
  * triangles and parallelograms. */
 rp_vec3 hier_node_point(const hier_node *nd, double u1, double u2);

@@ -907,7 +907,8 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     } else {
         /* An idle pass (the usual one near convergence): the list's room
          * beyond its links is given back (a pass that dropped links left
-         * it). */
+         * it), and the nodes' (growth by half). */
+        hier_nodes_trim(s);
         if (s->nlinks > 0 && s->cap_links > s->nlinks) {
             hier_link *t = realloc(s->links, s->nlinks * sizeof *t);
             if (t) {

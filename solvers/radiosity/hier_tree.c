@@ -43,6 +43,44 @@ static void node_measure(hier_node *nd)
                          : c1;
 }
 
+/* Every per-node array to room for cap nodes.  Returns 0 if a realloc
+ * failed (that array keeps its old room). */
+static int resize_nodes(hier_state *s, size_t cap)
+{
+    int ok = 1;
+    hier_node *nd = realloc(s->nodes, cap * sizeof *nd);
+    ok &= nd != NULL;
+    if (nd)
+        s->nodes = nd;
+    double **arrs[4] = {&s->B, &s->Bg, &s->Bd, s->Y ? &s->Y : NULL};
+    for (int k = 0; k < 4; k++) {
+        if (!arrs[k])
+            continue;
+        double *a = realloc(*arrs[k], cap * s->nb * sizeof *a);
+        ok &= a != NULL;
+        if (a)
+            *arrs[k] = a;
+    }
+    if (s->linear) {
+        hier_basis *bs = realloc(s->basis, cap * sizeof *bs);
+        ok &= bs != NULL;
+        if (bs)
+            s->basis = bs;
+        double **lin[3] = {&s->B1, &s->Bg1, &s->Bd1};
+        for (int k = 0; k < 3; k++) {
+            double *a = realloc(*lin[k], cap * s->nb * 2 * sizeof *a);
+            ok &= a != NULL;
+            if (a)
+                *lin[k] = a;
+        }
+    }
+    double *w = realloc(s->W, cap * sizeof *w);
+    ok &= w != NULL;
+    if (w)
+        s->W = w;
+    return ok;
+}
+
 static rp_status grow_nodes(hier_state *s, size_t need, rp_error *err)
 {
     if (need <= s->cap_nodes)
@@ -52,42 +90,20 @@ static rp_status grow_nodes(hier_state *s, size_t need, rp_error *err)
     size_t cap = s->cap_nodes ? s->cap_nodes + s->cap_nodes / 2 : 1024;
     if (cap < need)
         cap = need;
-    hier_node *nd = realloc(s->nodes, cap * sizeof *nd);
-    if (!nd)
+    if (!resize_nodes(s, cap))
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
-    s->nodes = nd;
-    double **arrs[3] = {&s->B, &s->Bg, &s->Bd};
-    for (int k = 0; k < 3; k++) {
-        double *a = realloc(*arrs[k], cap * s->nb * sizeof *a);
-        if (!a)
-            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
-        *arrs[k] = a;
-    }
-    if (s->Y) {
-        double *y = realloc(s->Y, cap * s->nb * sizeof *y);
-        if (!y)
-            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
-        s->Y = y;
-    }
-    if (s->linear) {
-        hier_basis *bs = realloc(s->basis, cap * sizeof *bs);
-        if (!bs)
-            return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
-        s->basis = bs;
-        double **lin[3] = {&s->B1, &s->Bg1, &s->Bd1};
-        for (int k = 0; k < 3; k++) {
-            double *a = realloc(*lin[k], cap * s->nb * 2 * sizeof *a);
-            if (!a)
-                return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
-            *lin[k] = a;
-        }
-    }
-    double *w = realloc(s->W, cap * sizeof *w);
-    if (!w)
-        return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu nodes", cap);
-    s->W = w;
     s->cap_nodes = cap;
     return RP_OK;
+}
+
+void hier_nodes_trim(hier_state *s)
+{
+    if (s->nnodes == 0 || s->cap_nodes <= s->nnodes)
+        return;
+    /* A shrinking realloc that fails leaves the old, larger block: every
+     * array still has room for nnodes. */
+    resize_nodes(s, s->nnodes);
+    s->cap_nodes = s->nnodes;
 }
 
 rp_status hier_nodes_init(hier_state *s, rp_error *err)
