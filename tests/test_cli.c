@@ -603,7 +603,8 @@ Test(cli, sigterm_during_uniform_setup_ends_the_run, .timeout = 300)
 /* A run cut short by --max-iterations or --time reports converged: false
  * and its residual (probe --json; render's EXR metadata) and warns on
  * stderr; a converged one reports converged: true with residual <=
- * tolerance; a method without a residual reports null. */
+ * tolerance; a method without a residual reports null.  probe --json
+ * gives the process's peak resident size beside the method's memory. */
 Test(cli, unconverged_runs_say_so, .timeout = 120)
 {
     rp_run r = rp_run_radpt("probe scenes/cornell.scene --method gauss-seidel --elements 200 --max-iterations 2 "
@@ -613,6 +614,10 @@ Test(cli, unconverged_runs_say_so, .timeout = 120)
     double res = rp_json_number_after(r.out, "{", "residual"), tol = rp_json_number_after(r.out, "{", "tolerance");
     cr_expect(res > tol && tol == 1e-6, "residual %g, tolerance %g", res, tol);
     cr_expect(strstr(r.out, "\"stopped_by\": \"iterations\"") != NULL, "%s", r.out);
+    /* the process's peak resident size holds at least what the method
+     * says it holds */
+    double held = rp_json_number_after(r.out, "{", "memory_bytes"), peak = rp_json_number_after(r.out, "{", "peak_rss_bytes");
+    cr_expect(held > 0 && peak >= held, "memory_bytes %g, peak_rss_bytes %g", held, peak);
     cr_expect(strstr(r.err, "warning: gauss-seidel stopped by --max-iterations after 2 sweeps, residual") &&
                   strstr(r.err, "not converged"),
               "stderr: %s", r.err);

@@ -477,6 +477,8 @@ int rp_cmd_render(int argc, char **argv)
         printf(", %.4g form factors", tot.sum.form_factors);
     if (tot.last.memory > 0)
         printf(", %.1f MiB held by the method", tot.last.memory / 1048576.0);
+    if (!rp_solver_comm(solver))
+        printf(", peak resident %.1f MiB", rp_peak_rss_mb());
     if (rp_solver_comm(solver)) {
         /* split over ranks: the largest rank's memory (make bench-mpi) */
         double mem[2] = {tot.last.memory / 1048576.0, rp_peak_rss_mb()};
@@ -560,9 +562,9 @@ int rp_cmd_probe(int argc, char **argv)
         printf(", \"hash\": \"%s\", \"method\": ", hash);
         rp_json_string(stdout, cli.method);
         printf(", \"seed\": %llu, \"samples\": %.17g, \"seconds\": %.6f, \"rays\": %.17g, "
-               "\"form_factors\": %.17g, \"memory_bytes\": %.17g",
+               "\"form_factors\": %.17g, \"memory_bytes\": %.17g, \"peak_rss_bytes\": %.17g",
                (unsigned long long)cli.seed, est.samples, tot.wall_s, tot.sum.rays, tot.sum.form_factors,
-               tot.last.memory);
+               tot.last.memory, rp_peak_rss_mb() * 1048576.0);
         /* null where the method has no residual and tolerance */
         if (conv.known)
             printf(", \"converged\": %s, \"residual\": %.17g, \"tolerance\": %.17g", conv.converged ? "true" : "false",
@@ -586,6 +588,7 @@ int rp_cmd_probe(int argc, char **argv)
         printf("# %s, method %s, %.17g samples, %.3f s", cli.scene, cli.method, est.samples, tot.wall_s);
         if (tot.last.memory > 0)
             printf(", %.1f MiB held by the method", tot.last.memory / 1048576.0);
+        printf(", peak resident %.1f MiB", rp_peak_rss_mb());
         printf("; radiance W sr^-1 m^-2 per band +- standard error\n");
         printf("%-20s %14s  radiance\n", "surface", "area");
         for (size_t s = 0; s < ns; s++) {
