@@ -421,11 +421,39 @@ static int node_can_split(const hier_state *s, uint32_t it)
     return is_node(it) && 0.25 * s->nodes[it].area >= s->min_area;
 }
 
-/* 0 keep, 1 split the receiver, 2 the source, 3 both, 4 drop. */
+/* A form-factor bound in (0, 1] in 16 bits: the upper half of its float,
+ * rounded up, so the bound stays a bound (at most 2^-7 above it). */
+static uint16_t fb_pack(double Fb)
+{
+    float f = (float)Fb;
+    if ((double)f < Fb)
+        f = nextafterf(f, 2.0f);
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    u = (u >> 16) + ((u & 0xffffu) != 0);
+    return (uint16_t)(u ? u : 1);
+}
+
+static double fb_unpack(uint16_t b)
+{
+    uint32_t u = (uint32_t)b << 16;
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+/* 0 keep, 1 split the receiver, 2 the source, 3 both, 4 drop.  A link's
+ * bound depends on the geometry alone: judged when the link was made and
+ * kept in it (l->Fb), it is not judged again at every pass (stored cluster
+ * links were 90% of the calls to judge). */
 static int cl_decide(const hier_state *s, const hier_clink *l)
 {
     double Fb = 0;
-    int j = judge(s, l->recv, l->src, &Fb);
+    int j = l->Fb ? 1 : judge(s, l->recv, l->src, &Fb);
+    if (l->Fb)
+        Fb = fb_unpack(l->Fb);
+    else if (j == 1)
+        Fb = fb_unpack(fb_pack(Fb)); /* as it will be read at the next pass */
     if (j < 0)
         return 4;
     if (j == 1) {
@@ -849,7 +877,7 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
                 if (s->cl_nent[f + j].F != 0)
                     s->cl_nent[at + n++] = s->cl_nent[f + j];
             l->first = (uint32_t)at;
-            l->count = n;
+            l->count = (uint16_t)n;
             at += n;
         }
         s->ncl_nent = at;
@@ -933,7 +961,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     for (size_t k0 = 0; k0 < nl;) {
         size_t nnew = 0, k1 = k0;
         for (; k1 < nl && nnew < EVAL_CHUNK; k1++)
-            if (links[k1].count == RP_NONE && is_node(links[k1].recv)) {
+            if (links[k1].count == HIER_CL_NONE && is_node(links[k1].recv)) {
                 if (!hier_grow((void **)&idx, &capidx, nnew + 1, sizeof *idx))
                     goto nomem;
                 idx[nnew++] = (uint32_t)k1;
@@ -952,7 +980,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
         for (size_t i = 0; i < nnew; i++) {
             hier_clink *l = &links[idx[i]];
             l->first = (uint32_t)s->ncl_nent;
-            l->count = cnt[i];
+            l->count = (uint16_t)cnt[i];
             if (s->ncl_nent + cnt[i] > UINT32_MAX ||
                 !hier_grow((void **)&s->cl_nent, &s->cap_cl_nent, s->ncl_nent + cnt[i] + 1, sizeof *s->cl_nent))
                 goto nomem;
@@ -965,7 +993,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
         k0 = k1;
     }
     for (size_t k = 0; k < nl; k++)
-        if (links[k].count == RP_NONE) { /* received by a cluster */
+        if (links[k].count == HIER_CL_NONE) { /* received by a cluster */
             dirty[links[k].recv & ~HIER_CL_BIT] |= 2;
             links[k].count = 0;
         }
@@ -1092,7 +1120,8 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
             goto nomem;
         work[0].recv = work[0].src = HIER_CL_BIT; /* the root cluster */
         work[0].Fu = -1;
-        work[0].count = RP_NONE;
+        work[0].count = HIER_CL_NONE;
+        work[0].Fb = 0;
         nw = 1;
     } else {
         /* The stored links are judged again, with the current radiosities. */
@@ -1134,7 +1163,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                 continue;
             }
             changed = 1;
-            if (l.count != RP_NONE) {
+            if (l.count != HIER_CL_NONE) {
                 /* A stored link goes: its receiver's entries go with it. */
                 if (is_node(l.recv))
                     s->ncl_ndead += kill_nentries(s->cl_nent + l.first, l.count);
@@ -1201,12 +1230,14 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                 code[t] = (unsigned char)hier_link_eval(s, r, src, &fcand[t], &rays);
                 continue;
             }
-            double Fb;
+            double Fb = 0;
             cand[t].recv = r;
             cand[t].src = src;
             cand[t].Fu = -1;
-            cand[t].count = RP_NONE;
-            code[t] = judge(s, r, src, &Fb) < 0 ? 0 : 3;
+            cand[t].count = HIER_CL_NONE;
+            int j = judge(s, r, src, &Fb);
+            cand[t].Fb = j == 1 ? fb_pack(Fb) : 0;
+            code[t] = j < 0 ? 0 : 3;
         }
         s->rays += rays;
         size_t nn = 0;

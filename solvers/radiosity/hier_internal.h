@@ -143,10 +143,18 @@ typedef struct hier_clink {
                            estimate (kernel only), -1 until evaluated */
         uint32_t first; /* node receivers: their entries in cl_nent */
     };
-    uint32_t count;     /* node receivers: how many entries; RP_NONE until
-                           the link is evaluated (any receiver), then 0 for
-                           a cluster receiver */
+    uint16_t count;     /* node receivers: how many entries (at most
+                           --cluster-rays, 256); HIER_CL_NONE until the link
+                           is evaluated (any receiver), then 0 for a
+                           cluster receiver */
+    uint16_t Fb;        /* the oracle's form-factor bound (geometry only,
+                           so judged once), rounded up to 8 bits of
+                           mantissa (hier_cluster.c fb_pack); 0 when not
+                           yet judged */
 } hier_clink;
+
+/* hier_clink.count of a link not yet evaluated. */
+#define HIER_CL_NONE 0xffffu
 
 /* One sampled piece of cluster-link transfer: node recv (a quadtree node,
  * or the root of a face below a receiving cluster) gathers rho F B[src],
