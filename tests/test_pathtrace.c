@@ -438,6 +438,59 @@ static void plates_check(const char *scene, double F)
 }
 
 Test(pathtrace, plates_parallel) { plates_check("plates-parallel.scene", rp_cf_howell_parallel(1, 1, 1)); }
+
+/* --target-error: the probe stops at the first batch after which every
+ * surface's standard error is at most that fraction of its average (the
+ * batch before, some surface's was not), well before --samples, and the
+ * receiver's average there agrees with Howell's closed form (parallel unit
+ * plates at distance 1) within 4 standard errors; a target never reached
+ * leaves --samples as the cap. */
+Test(pathtrace, target_error_stops_at_the_first_batch_within_it)
+{
+    rp_scene *sc = rp_test_load("scenes/plates-parallel.scene");
+    uint32_t rc = surface(sc, "receiver");
+    const size_t ns = rp_scene_nsurfaces(sc);
+    double want = 0.5 * rp_cf_howell_parallel(1, 1, 1);
+    rp_solver *s = create(sc, RP_WANT_SURFACES, 5, 0, "target-error", "0.005", "samples", "1048576", "batch", "512",
+                          NULL);
+    rp_error err = {""};
+    double L[8], se[8], worst_before = INFINITY;
+    int steps = 0;
+    for (;;) {
+        rp_step_info info;
+        cr_assert_eq(rp_solver_step(s, &info, &err), RP_OK, "%s", err.message);
+        steps++;
+        rp_estimate e = {NULL, NULL, L, se, 0};
+        cr_assert_eq(rp_solver_estimate(s, &e, &err), RP_OK);
+        double worst = 0;
+        for (size_t i = 0; i < ns; i++)
+            worst = fmax(worst, L[i] > 0 ? se[i] / L[i] : 0);
+        if (info.converged) {
+            cr_expect_leq(worst, 0.005, "stopped at a largest relative error of %g", worst);
+            cr_expect_gt(worst_before, 0.005, "the batch before was already within: %g", worst_before);
+            cr_expect_lt(e.samples, 1048576, "ran to the cap");
+            cr_expect_eq(e.samples, 512.0 * steps);
+            cr_expect_gt(steps, 4, "within 0.5%% after %d batches: the target asks too little to test", steps);
+            break;
+        }
+        cr_assert_lt(info.progress, 1.0);
+        worst_before = worst;
+        cr_assert_lt(steps, 2048, "never within 0.5%%");
+    }
+    cr_expect_lt(fabs(L[rc] - want), 4 * se[rc], "receiver %.6f +- %.2e, Howell %.6f", L[rc], se[rc], want);
+    cr_log_info("--target-error 0.005: %d batches of 512, receiver %.6f +- %.2e (Howell %.6f)", steps, L[rc], se[rc],
+                want);
+    rp_solver_destroy(s);
+    s = create(sc, RP_WANT_SURFACES, 5, 0, "target-error", "1e-6", "samples", "2048", "batch", "512", NULL);
+    rp_step_info total = run(s);
+    cr_expect_eq(total.iterations, 4.0, "the cap of 2048 samples in batches of 512");
+    rp_solver_destroy(s);
+    /* out of range */
+    const char *k[] = {"target-error"}, *v[] = {"-0.1"};
+    rp_options o = {sizeof o, RP_WANT_SURFACES, 1, 0, k, v, 1, 0, NULL, NULL, NULL, NULL, NULL};
+    cr_expect_neq(rp_solver_create(rp_solver_lookup("pathtrace"), sc, &o, &s, &err), RP_OK);
+    rp_scene_destroy(sc);
+}
 Test(pathtrace, plates_perpendicular)
 {
     plates_check("plates-perpendicular.scene", rp_cf_howell_perpendicular(1, 1, 1));

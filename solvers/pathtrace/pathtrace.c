@@ -78,6 +78,7 @@ typedef struct pt_state {
      * bit-identical for any rank and thread count. */
     const rp_comm *comm;
     unsigned long spp, samples, batch;
+    double target_error; /* --target-error: 0 off */
     /* Under an open-ended harness budget, spp and samples stop the run
      * only when given explicitly (solver.h, rp_options.open_ended). */
     int spp_rule, samples_rule;
@@ -122,6 +123,10 @@ static const rp_option_spec pt_options[] = {
      "budget only when given",
      "4096"},
     {"batch", "N", "probe points per surface added by each step", "1024"},
+    {"target-error", "REL",
+     "surface averages have converged once every surface's standard error is at most REL times its "
+     "average in every band (checked after each batch; --samples stays the cap; 0: off)",
+     "0"},
     {"sampler", "random|stratified|sobol",
      "random: hashed uniform numbers; stratified: jittered grid per pair of dimensions; "
      "sobol: Owen-scrambled Sobol' (22 dimensions, random beyond)",
@@ -199,6 +204,8 @@ static rp_status pt_parse_options(pt_state *s, const rp_options *o, rp_sampler_k
     if ((st = rp_options_uint(o, "rr-depth", 1, 1000000, &rr, err)) != RP_OK)
         return st;
     s->rr_depth = (unsigned)rr;
+    if ((st = rp_options_double(o, "target-error", 0.0, 1.0, &s->target_error, err)) != RP_OK)
+        return st;
     s->rr_weight = PT_RR_WEIGHT;
     if ((st = rp_options_double(o, "rr-weight", 1e-6, 1.0, &s->rr_weight, err)) != RP_OK)
         return st;
@@ -640,6 +647,8 @@ static rp_status pt_probe_batch(pt_state *s, rp_step_info *info, rp_error *err)
     return RP_OK;
 }
 
+static int pt_probe_done(const pt_state *s, double *progress);
+
 static rp_status pt_step(void *state, rp_step_info *info, rp_error *err)
 {
     pt_state *s = state;
@@ -657,8 +666,8 @@ static rp_status pt_step(void *state, rp_step_info *info, rp_error *err)
         rp_status st = pt_probe_batch(s, info, err);
         if (st != RP_OK)
             return st;
-        done = done && s->samples_rule && s->probe_done >= s->samples;
-        double f = (double)s->probe_done / (double)s->samples;
+        double f;
+        done = done && pt_probe_done(s, &f);
         progress = f < progress ? f : progress;
     }
     info->iterations += 1;
@@ -685,6 +694,37 @@ static inline void pt_moments(double sum, double sumsq, double shift, double n, 
     }
     double v = (sumsq - sum * sum / n) / (n - 1);
     *var = v > 0 ? v / n : 0;
+}
+
+/* Whether the surface averages have converged: --samples reached (when
+ * it rules), or every surface's standard error at most --target-error
+ * times its average in every band.  *progress: the larger of the two
+ * fractions, the second (target / largest relative error)^2 as the error
+ * falls as 1 / sqrt(samples). */
+static int pt_probe_done(const pt_state *s, double *progress)
+{
+    const size_t nb = s->nbands;
+    int done = s->samples_rule && s->probe_done >= s->samples;
+    double f = (double)s->probe_done / (double)s->samples;
+    if (s->target_error > 0) {
+        const rp_surface *surfs = rp_scene_surfaces(s->scene);
+        double worst = 0; /* largest standard error / average */
+        for (size_t i = 0; i < s->nsurfaces * nb; i++) {
+            double m, v;
+            double Le = s->mats[surfs[i / nb].material].Le[i % nb];
+            pt_moments(s->ssum[i], s->ssumsq[i], Le, (double)s->probe_done, &m, &v);
+            double r = v > 0 ? (m > 0 ? sqrt(v) / m : INFINITY) : 0;
+            worst = r > worst ? r : worst;
+        }
+        if (worst <= s->target_error)
+            done = 1, f = 1;
+        else if (isfinite(worst)) {
+            double g = (s->target_error / worst) * (s->target_error / worst);
+            f = g > f ? g : f;
+        }
+    }
+    *progress = f < 1 ? f : 1;
+    return done;
 }
 
 static rp_status pt_estimate(const void *state, rp_estimate *e, rp_error *err)
@@ -883,8 +923,8 @@ static rp_status pt_load(void *state, FILE *f, rp_step_info *info, rp_error *err
     } else
         info->iterations = ceil((double)s->probe_done / (double)s->batch);
     if (s->want & RP_WANT_SURFACES) {
-        done = done && s->samples_rule && s->probe_done >= s->samples;
-        double fr = (double)s->probe_done / (double)s->samples;
+        double fr;
+        done = done && pt_probe_done(s, &fr);
         progress = fr < progress ? fr : progress;
     }
     info->converged = done;
