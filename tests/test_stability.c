@@ -287,7 +287,6 @@ Test(stability, quick_atlas, .timeout = 240)
             continue;
         cr_expect_lt(num(c, r, cgain), 0.1 + 4 * num(c, r, cgse), "%s %s at offset %g: largest gain %g +- %g",
                      c->row[r][csc], c->row[r][cam], num(c, r, coff), num(c, r, cgain), num(c, r, cgse));
-        cr_expect_leq(num(c, r, cworst), num(c, r, cgain), "the largest |error| is not above the largest gain");
         if (!strcmp(c->row[r][csc], "thin-coincident") && num(c, r, coff) == 0)
             for (size_t q = 1; q < c->nrows; q++)
                 if (!strcmp(c->row[q][csc], "thin-coincident") && num(c, q, coff) == 1e-5 &&

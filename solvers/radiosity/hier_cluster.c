@@ -758,7 +758,7 @@ static rp_status cluster_sums(hier_state *s, rp_error *err)
 
 /* Cluster c lost links and gained none: the entries drawn for the links
  * it lost, rm[0..nrm) (cluster << 32 | source, sorted), die (F = 0, left
- * for compact_pool).  What is left is still unbiased for the links that
+ * for compact_pools).  What is left is still unbiased for the links that
  * stay: each link's entries estimate its own transfer. */
 static void prune_entries(hier_state *s, size_t c, const uint64_t *rm, size_t nrm)
 {
@@ -955,7 +955,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     /* New links received by clusters: their unoccluded estimates. */
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) if (nl > 1024)
     for (long k = 0; k < (long)nl; k++)
-        if (links[k].Fu < 0 && !is_node(links[k].recv))
+        if (!is_node(links[k].recv) && links[k].Fu < 0)
             links[k].Fu = (float)link_unoccluded(s, links[k].recv, links[k].src);
     /* New links received by nodes: entries, a chunk at a time. */
     for (size_t k0 = 0; k0 < nl;) {
@@ -1124,7 +1124,8 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
         work[0].Fb = 0;
         nw = 1;
     } else {
-        /* The stored links are judged again, with the current radiosities. */
+        /* The stored links are judged again, with the current radiosities
+         * (their form-factor bound is kept in them, cl_decide). */
         work = s->clinks;
         capw = s->cap_clinks;
         nw = s->nclinks;
@@ -1157,6 +1158,8 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
         for (size_t k = 0; k < nw; k++) {
             const hier_clink l = round[k];
             if (act[k] == 0) {
+                /* In the in-place round nk <= k < capk: this never moves
+                 * kept, which round still points into. */
                 if (!hier_grow((void **)&kept, &capk, nk + 1, sizeof *kept))
                     goto nomem;
                 kept[nk++] = l;
