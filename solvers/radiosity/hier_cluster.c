@@ -77,6 +77,7 @@
  * order; the parallel parts (judging, form factors, entries) write only their own
  * slots, and random numbers are keyed by the seed and the two items. */
 #include <math.h>
+#include <stddef.h>
 #include <omp.h>
 #include <stdlib.h>
 #include <string.h>
@@ -794,27 +795,20 @@ static void prune_entries(hier_state *s, size_t c, const uint64_t *rm, size_t nr
     }
 }
 
-/* Kills entries e[0..n) (their cluster drew new ones). */
-static size_t kill_entries(hier_centry *e, size_t n)
+/* Kills n entries of size bytes from base, their form factor a float at
+ * offset off (set to 0); returns how many were alive.  For both pools:
+ * the entries a cluster drew before drawing again, and those of a link a
+ * node received when the link goes. */
+static size_t kill_entries(void *base, size_t size, size_t off, size_t n)
 {
     size_t d = 0;
-    for (size_t k = 0; k < n; k++)
-        if (e[k].F != 0) {
-            e[k].F = 0;
+    for (size_t k = 0; k < n; k++) {
+        float *F = (float *)((char *)base + k * size + off);
+        if (*F != 0) {
+            *F = 0;
             d++;
         }
-    return d;
-}
-
-/* Kills a node-received link's entries e[0..n) (the link went). */
-static size_t kill_nentries(hier_nentry *e, size_t n)
-{
-    size_t d = 0;
-    for (size_t k = 0; k < n; k++)
-        if (e[k].F != 0) {
-            e[k].F = 0;
-            d++;
-        }
+    }
     return d;
 }
 
@@ -1037,7 +1031,8 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
             unsigned n = lstart[c + 1] - lstart[c];
             if (!(dirty[c] & 2))
                 continue;
-            s->ncl_cdead += kill_entries(s->cl_cent + s->cl_efirst[c], s->cl_ecount[c]);
+            s->ncl_cdead += kill_entries(s->cl_cent + s->cl_efirst[c], sizeof(hier_centry), offsetof(hier_centry, F),
+                                          s->cl_ecount[c]);
             if (n == 0)
                 continue;
             link_pdf(s, byc + lstart[c], n, pdf + lstart[c], cdf + lstart[c]);
@@ -1169,7 +1164,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
             if (l.count != HIER_CL_NONE) {
                 /* A stored link goes: its receiver's entries go with it. */
                 if (is_node(l.recv))
-                    s->ncl_ndead += kill_nentries(s->cl_nent + l.first, l.count);
+                    s->ncl_ndead += kill_entries(s->cl_nent + l.first, sizeof(hier_nentry), offsetof(hier_nentry, F), l.count);
                 else {
                     dirty[l.recv & ~HIER_CL_BIT] |= 1;
                     if (!hier_grow((void **)&rm, &caprm, nrm + 1, sizeof *rm))
