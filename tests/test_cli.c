@@ -600,6 +600,28 @@ Test(cli, sigterm_during_uniform_setup_ends_the_run, .timeout = 300)
     unlink(out);
 }
 
+/* --target-error stops the path tracer's probe; render says it ignores it
+ * rather than silently rendering the same image. */
+Test(cli, target_error_applies_to_probe_only, .timeout = 60)
+{
+    char out[64], args[256];
+    snprintf(out, sizeof out, "/tmp/rp_target_error.%d.exr", (int)getpid());
+    snprintf(args, sizeof args, "render scenes/cornell.scene --method pathtrace --spp 1 --target-error 0.01 -o %s", out);
+    rp_run r = rp_run_radpt(args);
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.err, "warning: pathtrace: --target-error 0.01 ignored: it applies to surface averages") != NULL,
+              "stderr: %s", r.err);
+    rp_run_free(&r);
+    unlink(out);
+    r = rp_run_radpt("probe scenes/cornell.scene --method pathtrace --surface-averages --target-error 0.05 "
+                     "--samples 1048576 --json");
+    cr_assert_eq(r.status, 0, "stderr: %s", r.err);
+    cr_expect(strstr(r.err, "ignored") == NULL, "stderr: %s", r.err);
+    double n = rp_json_number_after(r.out, "{", "samples");
+    cr_expect(n >= 1024 && n < 1048576, "%g samples per surface", n);
+    rp_run_free(&r);
+}
+
 /* A run cut short by --max-iterations or --time reports converged: false
  * and its residual (probe --json; render's EXR metadata) and warns on
  * stderr; a converged one reports converged: true with residual <=

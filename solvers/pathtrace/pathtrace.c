@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../../geometry/log.h"
 #include "../../geometry/raycast.h"
 #include "../../geometry/sample.h"
 #include "../solver.h"
@@ -206,6 +207,9 @@ static rp_status pt_parse_options(pt_state *s, const rp_options *o, rp_sampler_k
     s->rr_depth = (unsigned)rr;
     if ((st = rp_options_double(o, "target-error", 0.0, 1.0, &s->target_error, err)) != RP_OK)
         return st;
+    if (s->target_error > 0 && !(s->want & RP_WANT_SURFACES) && o)
+        rp_logf(o->log, o->log_ctx, "warning: pathtrace: --target-error %g ignored: it applies to surface averages "
+                "(probe) only", s->target_error);
     s->rr_weight = PT_RR_WEIGHT;
     if ((st = rp_options_double(o, "rr-weight", 1e-6, 1.0, &s->rr_weight, err)) != RP_OK)
         return st;
