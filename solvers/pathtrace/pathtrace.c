@@ -700,6 +700,15 @@ static inline void pt_moments(double sum, double sumsq, double shift, double n, 
     *var = v > 0 ? v / n : 0;
 }
 
+/* Mean and variance of the mean of surface and band i (i = surface x
+ * nbands + band): its emission plus the probe's reflected sums. */
+static void pt_surface_moments(const pt_state *s, const rp_surface *surfs, size_t i, double *mean, double *var)
+{
+    const size_t nb = s->nbands;
+    pt_moments(s->ssum[i], s->ssumsq[i], s->mats[surfs[i / nb].material].Le[i % nb], (double)s->probe_done, mean,
+               var);
+}
+
 /* Whether the surface averages have converged: --samples reached (when
  * it rules), or every surface's standard error at most --target-error
  * times its average in every band.  *progress: the larger of the two
@@ -715,8 +724,7 @@ static int pt_probe_done(const pt_state *s, double *progress)
         double worst = 0; /* largest standard error / average */
         for (size_t i = 0; i < s->nsurfaces * nb; i++) {
             double m, v;
-            double Le = s->mats[surfs[i / nb].material].Le[i % nb];
-            pt_moments(s->ssum[i], s->ssumsq[i], Le, (double)s->probe_done, &m, &v);
+            pt_surface_moments(s, surfs, i, &m, &v);
             double r = v > 0 ? (m > 0 ? sqrt(v) / m : INFINITY) : 0;
             worst = r > worst ? r : worst;
         }
@@ -761,8 +769,7 @@ static rp_status pt_estimate(const void *state, rp_estimate *e, rp_error *err)
         const rp_surface *surfs = rp_scene_surfaces(s->scene);
         for (size_t i = 0; i < s->nsurfaces * nb; i++) {
             double m, v;
-            double Le = s->mats[surfs[i / nb].material].Le[i % nb];
-            pt_moments(s->ssum[i], s->ssumsq[i], Le, (double)s->probe_done, &m, &v);
+            pt_surface_moments(s, surfs, i, &m, &v);
             if (e->surface_radiance)
                 e->surface_radiance[i] = m;
             if (e->surface_stderr)

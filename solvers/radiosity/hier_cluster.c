@@ -845,10 +845,10 @@ static void trim_to(void **a, size_t *cap, size_t want, size_t size)
 
 /* Gives a pool's unused storage back beyond a quarter of what it holds
  * (and its via array's, if it has one). */
-static void pool_trim(hier_centry **pool, size_t n, size_t *cap, uint32_t **via, size_t *capv)
+static void pool_trim(void **pool, size_t size, size_t n, size_t *cap, uint32_t **via, size_t *capv)
 {
     size_t want = n + n / 4 + 1024;
-    trim_to((void **)pool, cap, want, sizeof **pool);
+    trim_to(pool, cap, want, size);
     if (via)
         trim_to((void **)via, capv, want, sizeof **via);
 }
@@ -876,7 +876,7 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
         }
         s->ncl_nent = at;
         s->ncl_ndead = 0;
-        trim_to((void **)&s->cl_nent, &s->cap_cl_nent, s->ncl_nent + s->ncl_nent / 4 + 1024, sizeof *s->cl_nent);
+        pool_trim((void **)&s->cl_nent, sizeof *s->cl_nent, s->ncl_nent, &s->cap_cl_nent, NULL, NULL);
     }
     if (all ? s->ncl_cdead > 0 : 4 * s->ncl_cdead > s->ncl_cent) {
         /* Clusters' ranges are not in pool order once some drew again:
@@ -919,7 +919,7 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
         free(ord);
         s->ncl_cent = at;
         s->ncl_cdead = 0;
-        pool_trim(&s->cl_cent, s->ncl_cent, &s->cap_cl_cent, &s->cl_cvia, &s->cap_cl_cvia);
+        pool_trim((void **)&s->cl_cent, sizeof *s->cl_cent, s->ncl_cent, &s->cap_cl_cent, &s->cl_cvia, &s->cap_cl_cvia);
     }
 }
 
