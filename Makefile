@@ -41,8 +41,13 @@ CPPFLAGS := -I. $(GSL_CFLAGS) -D_POSIX_C_SOURCE=200809L -D_DEFAULT_SOURCE
 # inside the library stay direct.
 PIC      := -fPIC -fno-semantic-interposition
 CFLAGS   := -std=c11 $(OPT) -g -Wall -Wextra -Werror -fopenmp -MMD -MP $(PIC) $(SANITIZE)
-# CGAL is heavy to compile: no -g, one or two translation units.
-CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(PIC) $(SANITIZE)
+# CGAL is heavy to compile: no -g, one or two translation units.  NDEBUG
+# compiles CGAL's and Eigen's internal checks (CGAL_assertion, eigen_assert)
+# out of the plain build: the bunny's simplification takes 0.9 s instead of
+# 1.6 s, with the same mesh.  The sanitizer build (make asan) keeps them, so
+# the tests still run under them.
+CXXFLAGS := -std=c++17 $(OPT) -Wall -Wextra -Werror -MMD -MP -DCGAL_DISABLE_GMPXX $(if $(SANITIZE),,-DNDEBUG) \
+            $(PIC) $(SANITIZE)
 LDLIBS   := -lembree3 -lOpenEXRCore-3_1 -lpng $(GSL_LIBS) $(MPI_LIBS) \
             -lgmp -lmpfr -lstdc++ -lm
 LDFLAGS  := -fopenmp $(SANITIZE)
