@@ -8,19 +8,19 @@
  *     memory, rank and threads equal;
  *   - a bad input: exit 2 and the one message a plain run prints;
  *   - plainly, MPI is not initialised; under mpirun every rank knows K;
- *   - experiments with tables of their own (formfactors, stability): their
- *     units handed out to ranks, every CSV column but the times equal to a
- *     plain run's, also when resuming a plain run's partial journal. */
+ *   - experiments with tables of their own (formfactors here; stability,
+ *     resumed from a plain run's partial journal, in test_stability.c):
+ *     their units handed out to ranks, every CSV column but the times
+ *     equal to a plain run's. */
 #include <criterion/criterion.h>
-#include <dirent.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <unistd.h>
 
 #include "bench/report/image.h"
 #include "cli_util.h"
+#include "study_util.h"
 
 #define SCENE "scenes/cornell.scene"
 
@@ -214,102 +214,6 @@ Test(mpi, plain_runs_start_no_mpi)
     rp_run_free(&r);
 }
 
-/* 1 when the n characters at s contain word. */
-static int holds(const char *s, size_t n, const char *word)
-{
-    size_t w = strlen(word);
-    for (size_t i = 0; i + w <= n; i++)
-        if (!strncmp(s + i, word, w))
-            return 1;
-    return 0;
-}
-
-/* A CSV without its measured columns (those whose header names a time:
- * "second", "wall_s", "cpu_s", "measure_s"; or where and how it ran:
- * "rank", "threads", "_mb"); quoted fields may hold commas. */
-static char *computed_columns(const char *path)
-{
-    static const char *measured[] = {"second", "wall_s", "cpu_s", "measure_s", "rank", "threads", "_mb"};
-    char *csv = rp_read_file(path);
-    cr_assert_not_null(csv, "%s", path);
-    /* each field kept is followed by ',' (and the line's end by '\n') */
-    char *out = malloc(2 * strlen(csv) + 2), *o = out;
-    cr_assert_not_null(out);
-    unsigned long long drop = 0; /* bit c: column c is dropped */
-    int col = 0, header = 1, quoted = 0;
-    const char *field = csv;
-    for (const char *c = csv;; c++) {
-        if (*c == '"')
-            quoted = !quoted;
-        if (*c && (quoted || (*c != ',' && *c != '\n')))
-            continue;
-        size_t len = (size_t)(c - field);
-        if (header)
-            for (size_t m = 0; m < sizeof measured / sizeof measured[0]; m++)
-                if (col < 64 && holds(field, len, measured[m]))
-                    drop |= 1ull << col;
-        if (col >= 64 || !(drop >> col & 1)) {
-            memcpy(o, field, len);
-            o += len;
-            *o++ = ',';
-        }
-        if (!*c)
-            break;
-        if (*c == '\n') {
-            *o++ = '\n';
-            header = col = 0;
-        } else
-            col++;
-        field = c + 1;
-    }
-    *o = '\0';
-    free(csv);
-    return out;
-}
-
-/* Every CSV of dir a equals dir b's in its computed columns; returns how
- * many CSVs were compared. */
-static int same_tables(const char *a, const char *b, const char *what)
-{
-    DIR *d = opendir(a);
-    cr_assert_not_null(d, "%s", a);
-    int n = 0;
-    for (struct dirent *e; (e = readdir(d));) {
-        size_t len = strlen(e->d_name);
-        if (len < 5 || strcmp(e->d_name + len - 4, ".csv"))
-            continue;
-        char pa[512], pb[512];
-        snprintf(pa, sizeof pa, "%s/%s", a, e->d_name);
-        snprintf(pb, sizeof pb, "%s/%s", b, e->d_name);
-        /* stability's furnace runs race a 0.7 s clock (stochastic-jacobi
-         * always ends there, hierarchical at rho 0.999 needs 0.5 s of it):
-         * on a loaded machine their counts differ from run to run */
-        if (!strcmp(e->d_name, "reflectance.csv"))
-            continue;
-        char *x = computed_columns(pa), *y = computed_columns(pb);
-        /* messages may name the study's directory */
-        for (char *at; (at = strstr(y, b));)
-            memcpy(at, a, strlen(a));
-        cr_expect_str_eq(y, x, "%s: %s differs from the plain run's", what, e->d_name);
-        free(x);
-        free(y);
-        n++;
-    }
-    closedir(d);
-    return n;
-}
-
-/* "this rank computed M of N units" from rank 0's log: M, and N in *n. */
-static long computed_units(const rp_run *r, long *n)
-{
-    const char *text = strstr(r->out, "this rank computed ") ? r->out : r->err;
-    const char *at = strstr(text, "this rank computed ");
-    cr_assert_not_null(at, "no hand-out in the log:\n%s\n%s", r->out, r->err);
-    long m = -1;
-    cr_assert_eq(sscanf(at, "this rank computed %ld of %ld units", &m, n), 2, "%s", at);
-    return m;
-}
-
 Test(mpi, experiment_units_are_handed_out_to_ranks)
 {
     char args[512], dir[160];
@@ -319,7 +223,7 @@ Test(mpi, experiment_units_are_handed_out_to_ranks)
     rp_run_free(&r);
     snprintf(dir, sizeof dir, "%s/f1", tmpdir);
     /* 3 ranks, not a power of two (2 ranks hand out the stability study's
-     * units in stability_resumed_by_ranks_equals_a_plain_run) */
+     * units in tests/test_stability.c, quick_atlas) */
     {
         const int k = 3;
         char other[160];
@@ -328,11 +232,11 @@ Test(mpi, experiment_units_are_handed_out_to_ranks)
         r = rp_run_radpt_mpi(k, args);
         cr_assert_eq(r.status, 0, "K=%d: %s", k, r.err);
         /* rank 0 took units 0, K, 2K, ... of the 36 */
-        long n = 0, m = computed_units(&r, &n);
+        long n = 0, m = rp_study_computed_units(&r, &n);
         cr_expect_eq(n, 36, "K=%d", k);
         cr_expect_eq(m, (n + k - 1) / k, "K=%d: rank 0 computed %ld of %ld", k, m, n);
         rp_run_free(&r);
-        cr_expect_eq(same_tables(dir, other, "K=3"), 1);
+        cr_expect_eq(rp_study_same_tables(dir, other, "K=3"), 1);
         /* the journal holds every unit once: its two head lines and 36 */
         char path[200];
         snprintf(path, sizeof path, "%s/journal.txt", other);
@@ -346,48 +250,3 @@ Test(mpi, experiment_units_are_handed_out_to_ranks)
     }
 }
 
-/* DIR/journal.txt as an interruption after keep units would have left
- * the journal of the study in from. */
-static void cut_journal(const char *from, const char *dir, size_t keep)
-{
-    char path[200];
-    snprintf(path, sizeof path, "%s/journal.txt", from);
-    char *j = rp_read_file(path);
-    cr_assert_not_null(j, "%s", path);
-    char *c = j;
-    for (size_t line = 0; line < 2 + keep; line++) {
-        c = strchr(c, '\n');
-        cr_assert_not_null(c, "%s has fewer than %zu records", path, keep);
-        c++;
-    }
-    cr_assert_eq(mkdir(dir, 0777), 0, "%s", dir);
-    snprintf(path, sizeof path, "%s/journal.txt", dir);
-    FILE *f = fopen(path, "w");
-    cr_assert_not_null(f);
-    fwrite(j, 1, (size_t)(c - j), f);
-    fclose(f);
-    free(j);
-}
-
-Test(mpi, stability_resumed_by_ranks_equals_a_plain_run)
-{
-    char args[512], plain[160], other[160];
-    snprintf(plain, sizeof plain, "%s/s1", tmpdir);
-    snprintf(args, sizeof args, "experiment stability --quick --threads 1 -o %s", plain);
-    rp_run r = rp_run_radpt(args);
-    cr_assert_eq(r.status, 0, "%s", r.err);
-    rp_run_free(&r);
-    /* interrupted after 112 units (of 137), resumed by 2 ranks: 112 units
-     * read back, the rest handed out; every table equal but its times */
-    snprintf(other, sizeof other, "%s/s2", tmpdir);
-    cut_journal(plain, other, 112);
-    snprintf(args, sizeof args, "experiment stability --quick --threads 1 --resume %s", other);
-    r = rp_run_radpt_mpi(2, args);
-    cr_assert_eq(r.status, 0, "%s", r.err);
-    long rest = 0, m = computed_units(&r, &rest);
-    cr_expect_gt(rest, 20, "%ld units left", rest);
-    cr_expect_eq(m, (rest + 1) / 2, "rank 0 computed %ld of %ld", m, rest);
-    rp_run_free(&r);
-    int tables = same_tables(plain, other, "resumed, K=2");
-    cr_expect_geq(tables, 8, "%d tables", tables);
-}

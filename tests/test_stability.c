@@ -4,7 +4,8 @@
  * with values the atlas did not produce: Jacobi's sweep count in the
  * furnace, the truncation bias of a depth-capped path tracer, Howell's
  * C-14, the sign of the leaks, the exit status of the real binary on the
- * non-physical scenes. */
+ * non-physical scenes.  The same atlas, cut short and resumed by two MPI
+ * ranks, writes the same tables. */
 #include <criterion/criterion.h>
 #include <ctype.h>
 #include <math.h>
@@ -15,6 +16,7 @@
 
 #include "bench/experiments/experiments.h"
 #include "cli_util.h"
+#include "study_util.h"
 
 #define MAXF 16
 
@@ -129,12 +131,20 @@ Test(stability, quick_atlas, .timeout = 240)
     cr_assert_not_null(e);
     char scenes[600];
     snprintf(scenes, sizeof scenes, "%s/scenes", RP_SOURCE_DIR);
-    rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = 1, .out_dir = dir, .scenes_dir = scenes, .threads = 2,
-                              .log = nolog};
     rp_error err;
     rp_error_clear(&err);
+    /* journaled as `radpt experiment stability --quick` journals it (its
+     * identity as bench/cli/cmd_bench.c writes it), so that the CLI can
+     * resume it below */
+    rp_journal *journal = NULL;
+    cr_assert_eq(rp_journal_open(dir, "experiment stability quick 1 budget 0 seeds 0", 0, &journal, &err), RP_OK, "%s",
+                 err.message);
+    rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = 1, .out_dir = dir, .scenes_dir = scenes, .threads = 2,
+                              .log = nolog, .journal = journal};
     rp_status st = e->run(&p, &err);
     cr_assert_eq(st, RP_OK, "%s", err.message);
+    rp_journal_tidy(journal);
+    rp_journal_close(journal);
 
     /* the report and its sections */
     char path[256];
@@ -332,6 +342,26 @@ Test(stability, quick_atlas, .timeout = 240)
     pclose(ls);
     cr_expect_eq(n, 10);
 
-    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    /* The same atlas interrupted after 112 units (of 137) and resumed by
+     * 2 ranks under mpirun, one thread each: the 112 units read back, the
+     * rest handed out (rank 0 computes every other one), and every table
+     * equal to this run's (on two threads) but its times (issue 14;
+     * tests/test_mpi.c hands out formfactors' units to 3 ranks). */
+    char resumed[64];
+    snprintf(resumed, sizeof resumed, "/tmp/rp_stability_XXXXXX");
+    cr_assert_not_null(mkdtemp(resumed));
+    rp_study_cut_journal(dir, resumed, 112);
+    char args[256];
+    snprintf(args, sizeof args, "experiment stability --quick --threads 1 --resume %s", resumed);
+    rp_run r = rp_run_radpt_mpi(2, args);
+    cr_assert_eq(r.status, 0, "%s", r.err);
+    long rest = 0, m = rp_study_computed_units(&r, &rest);
+    cr_expect_eq(rest, 137 - 112, "%ld units left", rest);
+    cr_expect_eq(m, (rest + 1) / 2, "rank 0 computed %ld of %ld", m, rest);
+    rp_run_free(&r);
+    int tables = rp_study_same_tables(dir, resumed, "resumed, K=2");
+    cr_expect_geq(tables, 8, "%d tables", tables);
+
+    snprintf(cmd, sizeof cmd, "rm -rf '%s' '%s'", dir, resumed);
     cr_expect_eq(system(cmd), 0);
 }
