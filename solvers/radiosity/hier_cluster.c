@@ -945,6 +945,8 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     size_t captoff = 0;
     hier_clink *byc = NULL;
     double *pdf = NULL, *cdf = NULL;
+    uint32_t *order = NULL;
+    size_t capbyc = 0, cappdf = 0, capcdf = 0;
     double rays = 0;
     /* New links received by clusters: their unoccluded estimates. */
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) if (nl > 1024)
@@ -1000,7 +1002,10 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     }
     if (ngain == 0)
         goto done;
-    /* Links by receiving cluster (CSR, in link order). */
+    /* Links by receiving cluster (CSR, in link order): their indices; a
+     * chunk's clusters get a copy of their links with the links' pdf and
+     * cdf (32 bytes a link: for every link at once, 12 MB of the bunny
+     * scene's peak). */
     lstart = calloc(s->ncl + 1, sizeof *lstart);
     fill = malloc((s->ncl ? s->ncl : 1) * sizeof *fill);
     if (!lstart || !fill)
@@ -1013,19 +1018,19 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
         }
     for (size_t c = 0; c < s->ncl; c++)
         lstart[c + 1] += lstart[c];
-    byc = malloc((ncl_links ? ncl_links : 1) * sizeof *byc);
-    pdf = malloc((ncl_links ? ncl_links : 1) * sizeof *pdf);
-    cdf = malloc((ncl_links ? ncl_links : 1) * sizeof *cdf);
-    if (!byc || !pdf || !cdf)
+    order = malloc((ncl_links ? ncl_links : 1) * sizeof *order);
+    if (!order)
         goto nomem;
     memcpy(fill, lstart, s->ncl * sizeof *fill);
     for (size_t k = 0; k < nl; k++)
         if (!is_node(links[k].recv))
-            byc[fill[links[k].recv & ~HIER_CL_BIT]++] = links[k];
+            order[fill[links[k].recv & ~HIER_CL_BIT]++] = (uint32_t)k;
     for (size_t c0 = 0; c0 < s->ncl;) {
         /* Clusters [c0, c1) and the tasks (cluster, face) of those that
-         * gained links, each task with a slot of face_samples entries. */
+         * gained links, each task with a slot of face_samples entries; the
+         * chunk's links are byc[lstart[c] - base ...]. */
         size_t c1 = c0, ntask = 0, slots = 0;
+        const size_t base = lstart[c0];
         while (c1 < s->ncl && ntask < EVAL_CHUNK) {
             size_t c = c1++;
             unsigned n = lstart[c + 1] - lstart[c];
@@ -1035,7 +1040,14 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
                                           s->cl_ecount[c]);
             if (n == 0)
                 continue;
-            link_pdf(s, byc + lstart[c], n, pdf + lstart[c], cdf + lstart[c]);
+            const size_t a = lstart[c] - base;
+            if (!hier_grow((void **)&byc, &capbyc, a + n, sizeof *byc) ||
+                !hier_grow((void **)&pdf, &cappdf, a + n, sizeof *pdf) ||
+                !hier_grow((void **)&cdf, &capcdf, a + n, sizeof *cdf))
+                goto nomem;
+            for (unsigned i = 0; i < n; i++)
+                byc[a + i] = links[order[lstart[c] + i]];
+            link_pdf(s, byc + a, n, pdf + a, cdf + a);
             const hier_cluster *k = &s->cl[c];
             if (!hier_grow((void **)&tasks, &captask, 2 * (ntask + k->count), sizeof *tasks) ||
                 !hier_grow((void **)&toff, &captoff, ntask + k->count + 1, sizeof *toff))
@@ -1054,7 +1066,8 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) reduction(+ : rays) if (ntask > 256)
         for (long t = 0; t < (long)ntask; t++) {
             uint32_t c = tasks[2 * t], f = tasks[2 * t + 1];
-            uint32_t a = lstart[c], n = lstart[c + 1] - a;
+            size_t a = lstart[c] - base;
+            uint32_t n = lstart[c + 1] - lstart[c];
             cnt[t] = face_entries(s, c, f, byc + a, pdf + a, cdf + a, n, tmp + toff[t], &rays);
         }
         s->form_factors += (double)ntask;
@@ -1088,6 +1101,7 @@ done:
     free(byc);
     free(pdf);
     free(cdf);
+    free(order);
     return st;
 }
 
