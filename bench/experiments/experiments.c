@@ -492,9 +492,10 @@ static const rp_experiment experiments[] = {
      .scenes = "scenes/cornell.scene and scenes/real/CornellBox-Original.obj (boxes on the floor: contact shadows)",
      .claim = "at the same element count asked, Gauss-Seidel on a discontinuity mesh (elements following contact "
               "lines and shadow boundaries) has a lower surface error than on a uniform mesh (hierarchical radiosity, "
-              "from the faces and from their discontinuity mesh, with constant and linear bases, runs its defaults for 20 s "
-              "whatever --budget says, or in the quick form --bf-epsilon 0.05 --min-area 1e-4 to convergence; the report also says whether the linear basis beats the constant "
-              "one from the discontinuity mesh)",
+              "from the faces and from their discontinuity mesh, with constant and linear bases, runs its defaults "
+              "for 20 s whatever --budget says, or in the quick form --bf-epsilon 0.05 --min-area 1e-4 to "
+              "convergence; the report also says whether the linear basis beats the constant one from the "
+              "discontinuity mesh)",
      .quick = {60.0, 0, 256, NULL},
      .full = {300.0, 0, 2048, NULL},
      .own_units = 1,
