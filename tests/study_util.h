@@ -16,7 +16,7 @@ int rp_study_same_tables(const char *a, const char *b, const char *what);
 /* "this rank computed M of N units" from rank 0's log: M, and N in *n. */
 long rp_study_computed_units(const rp_run *r, long *n);
 
-/* Makes directory dir (or uses it, empty) holding the journal an interruption after keep
+/* Makes directory dir (or uses an existing one) holding the journal an interruption after keep
  * units would have left of the study in from. */
 void rp_study_cut_journal(const char *from, const char *dir, size_t keep);
 

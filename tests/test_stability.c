@@ -122,7 +122,7 @@ static void nolog(void *ctx, const char *m)
     (void)m;
 }
 
-Test(stability, quick_atlas, .timeout = 240)
+Test(stability, quick_atlas, .timeout = 400)
 {
     char dir[64];
     snprintf(dir, sizeof dir, "/tmp/rp_stability_XXXXXX");
@@ -343,16 +343,16 @@ Test(stability, quick_atlas, .timeout = 240)
     cr_expect_eq(n, 10);
 
     /* The same atlas interrupted after 112 units (of 137) and resumed by
-     * 2 ranks under mpirun, one thread each: the 112 units read back, the
-     * rest handed out (rank 0 computes every other one), and every table
-     * equal to this run's (on two threads) but its times (issue 14;
+     * 2 ranks under mpirun, two threads each as above: the 112 units read
+     * back, the rest handed out (rank 0 computes every other one), and
+     * every table equal to this run's but its times (issue 14;
      * tests/test_mpi.c hands out formfactors' units to 3 ranks). */
     char resumed[64];
     snprintf(resumed, sizeof resumed, "/tmp/rp_stability_XXXXXX");
     cr_assert_not_null(mkdtemp(resumed));
     rp_study_cut_journal(dir, resumed, 112);
     char args[256];
-    snprintf(args, sizeof args, "experiment stability --quick --threads 1 --resume %s", resumed);
+    snprintf(args, sizeof args, "experiment stability --quick --threads 2 --resume %s", resumed);
     rp_run r = rp_run_radpt_mpi(2, args);
     cr_assert_eq(r.status, 0, "%s", r.err);
     long rest = 0, m = rp_study_computed_units(&r, &rest);

@@ -255,7 +255,7 @@ int main(int argc, char **argv)
      * each mapped block freed (up to 32 MiB), after which the solvers'
      * growing arrays (a link list reallocated each refinement pass) land in
      * the heap and leave holes there: the bunny scene's hierarchical probe
-     * peaked at 165 MB resident instead of 130 MB (docs/design.md). */
+     * peaked at 162-173 MiB resident instead of 127 MiB (docs/design.md). */
     mallopt(M_MMAP_THRESHOLD, 128 * 1024);
 #endif
     /* Under mpirun every rank runs the same command; plainly, no MPI. */

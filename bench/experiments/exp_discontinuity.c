@@ -55,8 +55,10 @@ typedef struct dc_scene {
     /* hierarchical radiosity from the faces and from their discontinuity
      * mesh (dc_hr) */
     double hr_rmse[DC_HR], hr_surface_err[DC_HR], hr_seconds[DC_HR];
+    int hr_converged[DC_HR];
     /* the sweep (full form): [basis][bf-epsilon] */
     double sw_rmse[2][DC_SWEEP], sw_surface_err[2][DC_SWEEP], sw_seconds[2][DC_SWEEP];
+    int sw_converged[2][DC_SWEEP];
 } dc_scene;
 
 static const char *const dc_hr_spec[DC_HR] = {"hierarchical", "hierarchical:mesh=discontinuity",
@@ -162,7 +164,7 @@ static rp_status dc_write(const rp_experiment_params *p, dc_scene *sc, const uns
                 rp_exp_fnum(o.f, v[k]);
                 fputc(',', o.f);
             }
-            fputs("1\n", o.f);
+            fprintf(o.f, "%d\n", sc[s].hr_converged[h]);
         }
         for (int b = 0; b < 2 && !p->quick; b++)
             for (int k = 0; k < DC_SWEEP; k++) {
@@ -172,7 +174,7 @@ static rp_status dc_write(const rp_experiment_params *p, dc_scene *sc, const uns
                     rp_exp_fnum(o.f, v[i]);
                     fputc(',', o.f);
                 }
-                fputs("1\n", o.f);
+                fprintf(o.f, "%d\n", sc[s].sw_converged[b][k]);
             }
     }
     if ((st = rp_out_close(&o, 1, err)) != RP_OK)
@@ -282,6 +284,7 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                 sc[s].hr_rmse[h] = v[0];
                 sc[s].hr_surface_err[h] = v[1];
                 sc[s].hr_seconds[h] = v[2];
+                sc[s].hr_converged[h] = (int)v[3];
             }
         }
         for (int b = 0; b < 2 && st == RP_OK && !p->quick; b++)
@@ -297,6 +300,7 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                     sc[s].sw_rmse[b][k] = v[0];
                     sc[s].sw_surface_err[b][k] = v[1];
                     sc[s].sw_seconds[b][k] = v[2];
+                    sc[s].sw_converged[b][k] = (int)v[3];
                 }
             }
     }
@@ -361,7 +365,7 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                    "face) and on discontinuity meshes (triangles whose edges follow the lines where surfaces touch, "
                    "D0, and the umbra and penumbra boundaries of the lights, D1: Heckbert 1992; Lischinski, "
                    "Tampieri & Greenberg 1992) at about the same element counts (the table lists those made), and "
-                   "hierarchical radiosity %s (elements split where B x F asks: adaptive), "
+                   "hierarchical radiosity (elements split where B x F asks: adaptive) %s, "
                    "its quadtrees starting from the faces as given and from the faces cut along their D0 and D1 "
                    "lines (`--mesh discontinuity`, no points inside a face), each with the constant basis (an element's "
                    "mean) and the linear one (`--basis linear`: Galerkin with linear elements, Zatz 1993); in the "
@@ -372,7 +376,8 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                    "its path-traced reference (surface error: RMS relative error of the surface averages; image "
                    "RMSE over the measured pixels). Gauss-Seidel's images are flat (element values) or Gouraud (vertex "
                    "values interpolated: a linear reconstruction of the constant solution).\n\n",
-                p->quick ? "at `--bf-epsilon 0.05 --min-area 1e-4` run to convergence (the quick form)"
+                p->quick ? "at `--bf-epsilon 0.05 --min-area 1e-4`, run until a sweep changes the energy by "
+                           "less than 1e-6 (20 s at most; the quick form)"
                          : "with its defaults for 20 s",
                 sc[0].x.path, sc[1].x.path);
         if (p->command)

@@ -1025,12 +1025,12 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     for (size_t k = 0; k < nl; k++)
         if (!is_node(links[k].recv))
             order[fill[links[k].recv & ~HIER_CL_BIT]++] = (uint32_t)k;
+    /* from here fill[c] is where cluster c's links start in byc */
     for (size_t c0 = 0; c0 < s->ncl;) {
         /* Clusters [c0, c1) and the tasks (cluster, face) of those that
          * gained links, each task with a slot of face_samples entries; the
-         * chunk's links are byc[lstart[c] - base ...]. */
-        size_t c1 = c0, ntask = 0, slots = 0;
-        const size_t base = lstart[c0];
+         * links of those clusters are byc[fill[c] ...], one after another. */
+        size_t c1 = c0, ntask = 0, slots = 0, a = 0;
         while (c1 < s->ncl && ntask < EVAL_CHUNK) {
             size_t c = c1++;
             unsigned n = lstart[c + 1] - lstart[c];
@@ -1040,14 +1040,15 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
                                           s->cl_ecount[c]);
             if (n == 0)
                 continue;
-            const size_t a = lstart[c] - base;
             if (!hier_grow((void **)&byc, &capbyc, a + n, sizeof *byc) ||
                 !hier_grow((void **)&pdf, &cappdf, a + n, sizeof *pdf) ||
                 !hier_grow((void **)&cdf, &capcdf, a + n, sizeof *cdf))
                 goto nomem;
+            fill[c] = (uint32_t)a;
             for (unsigned i = 0; i < n; i++)
                 byc[a + i] = links[order[lstart[c] + i]];
             link_pdf(s, byc + a, n, pdf + a, cdf + a);
+            a += n;
             const hier_cluster *k = &s->cl[c];
             if (!hier_grow((void **)&tasks, &captask, 2 * (ntask + k->count), sizeof *tasks) ||
                 !hier_grow((void **)&toff, &captoff, ntask + k->count + 1, sizeof *toff))
@@ -1066,8 +1067,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) reduction(+ : rays) if (ntask > 256)
         for (long t = 0; t < (long)ntask; t++) {
             uint32_t c = tasks[2 * t], f = tasks[2 * t + 1];
-            size_t a = lstart[c] - base;
-            uint32_t n = lstart[c + 1] - lstart[c];
+            uint32_t a = fill[c], n = lstart[c + 1] - lstart[c];
             cnt[t] = face_entries(s, c, f, byc + a, pdf + a, cdf + a, n, tmp + toff[t], &rays);
         }
         s->form_factors += (double)ntask;
