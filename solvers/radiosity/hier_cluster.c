@@ -924,8 +924,10 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
 }
 
 /* Scratch is bounded: new work is done in chunks of about this many
- * receiving elements (links received by nodes, or faces). */
-#define EVAL_CHUNK 32768
+ * receiving elements (links received by nodes, or faces).  8192 faces
+ * draw about 135k samples (2.2 MB); 32768 took 8.8 MB, the bunny scene's
+ * peak 121 MiB against 109 MiB, in no less time. */
+#define EVAL_CHUNK 8192
 
 /* Evaluates the links refinement kept: the new ones get their unoccluded
  * estimate, those received by nodes their entries, and every cluster
