@@ -705,6 +705,9 @@ int hier_grow(void **a, size_t *cap, size_t need, size_t size)
  * stored ones stay where they are, marked when they go, so a pass that
  * splits nothing costs one parallel sweep over the links and leaves them
  * untouched. */
+/* Child links hier_refine evaluates at once. */
+#define HIER_SLOT_BLOCK ((size_t)1 << 16)
+
 rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 {
     *refined = 0;
@@ -868,31 +871,38 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
         }
         *refined += ns;
         s->links_refined += ns;
-        if (!hier_grow((void **)&cand, &capc, ns * 4, sizeof *cand) || !hier_grow((void **)&code, &capcode, ns * 4, 1) ||
-            !hier_grow((void **)&candF, &capcF, ns * 4, sizeof *candF))
-            goto nomem;
-        double rays = 0;
-#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (ns > 64)
-        for (long t = 0; t < (long)ns * 4; t++) {
-            const hier_link *l = &splitl[t / 4];
-            uint32_t c = (uint32_t)(t % 4);
-            uint32_t qi = l->recv, pi = l->src;
-            if (smode[t / 4] == 1)
-                qi = s->nodes[qi].child + c;
-            else
-                pi = s->nodes[pi].child + c;
-            code[t] = (unsigned char)link_eval(s, qi, pi, &cand[t], &candF[t], &rays, 1);
-        }
-        s->rays += rays;
+        /* The split links' children, evaluated in parallel into slots a
+         * block at a time (33 bytes a slot: all 4 ns at once were most of
+         * the Cornell box's peak at 1.5M leaves), then kept in order. */
         if (!hier_grow((void **)&fresh, &capf, ns * 4, sizeof *fresh) ||
             !hier_grow((void **)&freshF, &capfF, ns * 4, sizeof *freshF))
             goto nomem;
-        for (size_t t = 0; t < ns * 4; t++) {
-            if (code[t] == 0)
-                continue;
-            s->form_factors++;
-            freshF[nfresh] = candF[t];
-            fresh[nfresh++] = cand[t];
+        for (size_t t0 = 0; t0 < ns * 4; t0 += HIER_SLOT_BLOCK) {
+            const size_t nb = ns * 4 - t0 < HIER_SLOT_BLOCK ? ns * 4 - t0 : HIER_SLOT_BLOCK;
+            if (!hier_grow((void **)&cand, &capc, nb, sizeof *cand) || !hier_grow((void **)&code, &capcode, nb, 1) ||
+                !hier_grow((void **)&candF, &capcF, nb, sizeof *candF))
+                goto nomem;
+            double rays = 0;
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (nb > 256)
+            for (long i = 0; i < (long)nb; i++) {
+                const size_t t = t0 + (size_t)i;
+                const hier_link *l = &splitl[t / 4];
+                uint32_t c = (uint32_t)(t % 4);
+                uint32_t qi = l->recv, pi = l->src;
+                if (smode[t / 4] == 1)
+                    qi = s->nodes[qi].child + c;
+                else
+                    pi = s->nodes[pi].child + c;
+                code[i] = (unsigned char)link_eval(s, qi, pi, &cand[i], &candF[i], &rays, 1);
+            }
+            s->rays += rays;
+            for (size_t i = 0; i < nb; i++) {
+                if (code[i] == 0)
+                    continue;
+                s->form_factors++;
+                freshF[nfresh] = candF[i];
+                fresh[nfresh++] = cand[i];
+            }
         }
     }
     s->refine_passes++;
