@@ -133,14 +133,15 @@ Test(stability, quick_atlas, .timeout = 400)
     snprintf(scenes, sizeof scenes, "%s/scenes", RP_SOURCE_DIR);
     rp_error err;
     rp_error_clear(&err);
-    /* journaled as `radpt experiment stability --quick` journals it (its
-     * identity as bench/cli/cmd_bench.c writes it), so that the CLI can
-     * resume it below */
-    rp_journal *journal = NULL;
-    cr_assert_eq(rp_journal_open(dir, "experiment stability quick 1 budget 0 seeds 0", 0, &journal, &err), RP_OK, "%s",
-                 err.message);
     rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = 1, .out_dir = dir, .scenes_dir = scenes, .threads = 2,
-                              .log = nolog, .journal = journal};
+                              .log = nolog};
+    /* journaled as `radpt experiment stability --quick` journals it, so
+     * that the CLI can resume it below */
+    char identity[512];
+    rp_experiment_identity(&p, identity, sizeof identity);
+    rp_journal *journal = NULL;
+    cr_assert_eq(rp_journal_open(dir, identity, 0, &journal, &err), RP_OK, "%s", err.message);
+    p.journal = journal;
     rp_status st = e->run(&p, &err);
     cr_assert_eq(st, RP_OK, "%s", err.message);
     rp_journal_tidy(journal);

@@ -604,10 +604,8 @@ int rp_cmd_experiment(int argc, char **argv)
                               .cancel = &study_cancel};
     rp_error err;
     rp_error_clear(&err);
-    /* the journal's identity: the experiment and what changes its results */
     char identity[512];
-    snprintf(identity, sizeof identity, "experiment %s quick %d budget %.17g seeds %lu", e->name, found[0], budget,
-             seeds);
+    rp_experiment_identity(&p, identity, sizeof identity);
     rp_journal *journal = NULL;
     rp_status st = rp_mkdirs(dir, &err);
     if (st == RP_OK)

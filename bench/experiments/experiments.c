@@ -296,6 +296,12 @@ static rp_status handout_agree(const rp_comm *c, const struct rp_exp_handout *h,
     return rp_error_set(err, (rp_status)e.status, "%s", e.message);
 }
 
+void rp_experiment_identity(const rp_experiment_params *p, char *buf, size_t n)
+{
+    snprintf(buf, n, "experiment %s quick %d budget %.17g seeds %u", p->experiment->name, p->quick, p->budget,
+             p->nseeds);
+}
+
 rp_status rp_experiment_run(const rp_experiment_params *p, rp_error *err)
 {
     const rp_experiment *e = p->experiment;

@@ -87,6 +87,10 @@ typedef struct rp_experiment {
  * timings aside.  Otherwise it calls p->experiment->run. */
 rp_status rp_experiment_run(const rp_experiment_params *p, rp_error *err);
 
+/* The identity of p's journal (rp_journal_open): the experiment and what
+ * changes its results, the form and the budget and seeds asked. */
+void rp_experiment_identity(const rp_experiment_params *p, char *buf, size_t n);
+
 /* NULL-terminated list, and look-up by name. */
 const rp_experiment *const *rp_experiments(void);
 const rp_experiment *rp_experiment_lookup(const char *name);
