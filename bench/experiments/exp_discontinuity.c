@@ -365,7 +365,7 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                    "face) and on discontinuity meshes (triangles whose edges follow the lines where surfaces touch, "
                    "D0, and the umbra and penumbra boundaries of the lights, D1: Heckbert 1992; Lischinski, "
                    "Tampieri & Greenberg 1992) at about the same element counts (the table lists those made), and "
-                   "hierarchical radiosity (elements split where B x F asks: adaptive) %s, "
+                   "hierarchical radiosity (elements split where B x F asks: adaptive) %s for %g s at most, "
                    "its quadtrees starting from the faces as given and from the faces cut along their D0 and D1 "
                    "lines (`--mesh discontinuity`, no points inside a face), each with the constant basis (an element's "
                    "mean) and the linear one (`--basis linear`: Galerkin with linear elements, Zatz 1993); in the "
@@ -377,9 +377,9 @@ rp_status rp_exp_discontinuity(const rp_experiment_params *p, rp_error *err)
                    "RMSE over the measured pixels). Gauss-Seidel's images are flat (element values) or Gouraud (vertex "
                    "values interpolated: a linear reconstruction of the constant solution).\n\n",
                 p->quick ? "at `--bf-epsilon 0.05 --min-area 1e-4`, run until a sweep changes the energy by "
-                           "less than 1e-6 (20 s at most; the quick form)"
-                         : "with its defaults for 20 s",
-                sc[0].x.path, sc[1].x.path);
+                           "less than 1e-6 (the quick form)"
+                         : "with its defaults",
+                hr_budget, sc[0].x.path, sc[1].x.path);
         if (p->command)
             fprintf(f, "Command: `%s`\n\n", p->command);
         for (int s = 0; s < DC_SCENES; s++)
