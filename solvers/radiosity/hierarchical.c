@@ -105,8 +105,8 @@ static const rp_option_spec hier_options[] = {
     {"cluster-area", "auto|FRAC",
      "with clustering, links to elements and clusters smaller than FRAC x the area of the faces "
      "that reflect or emit are refined by the error in power (B x F x area) rather than radiosity; "
-     "auto: " HIER_CLUSTER_AREA_SURFACES " when only surface averages are asked for (probe: an "
-     "area average is a power), else " HIER_CLUSTER_AREA_IMAGE,
+     "auto: " HIER_CLUSTER_AREA_SURFACES " when only surface averages are asked for (probe: a "
+     "surface's average is its power over its area), else " HIER_CLUSTER_AREA_IMAGE,
      "auto"},
     RP_SIMPLIFY_OPTION("auto"),
     {"mesh", "faces|discontinuity",
@@ -506,17 +506,18 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     /* --cluster-area auto: what the run is asked for.  A surface's average
      * is its power over its area, so for surface averages alone an
      * element's error counts by the power it carries (Smits, Arvo &
-     * Greenberg 1994, sec. 4) up to a larger area: measured against the
-     * path tracer over seeds 1-4, 3e-3 keeps every surface of six
-     * clustered scenes within the spread 1e-3 gives, and the bunny scene
-     * solves in about half the time with 40% less memory (docs/design.md);
-     * an image shows each small element's radiosity, so it keeps 1e-3. */
+     * Greenberg 1994, sec. 4) below a larger area: measured against the
+     * path tracer at seeds 1-3 or 1-4, 3e-3 keeps six clustered scenes'
+     * worst surfaces about where 1e-3's seeds put them (CornellBox-Sphere
+     * 1.05-2.67% against 1.29-2.39%), and the bunny scene solves in about
+     * 55% of the time with 40% less memory (docs/design.md); an image
+     * shows each small element's radiosity, so it keeps 1e-3. */
     const char *ca = rp_options_word(o, "cluster-area");
     if (!ca || strcmp(ca, "auto") == 0) {
         unsigned w = s->want & (RP_WANT_IMAGE | RP_WANT_SURFACES);
         s->cl_area_rel = atof(w == RP_WANT_SURFACES ? HIER_CLUSTER_AREA_SURFACES : HIER_CLUSTER_AREA_IMAGE);
-    } else if ((st = rp_options_double(o, "cluster-area", 0, 1, &s->cl_area_rel, err)) != RP_OK)
-        return st;
+    } else if (rp_options_double(o, "cluster-area", 0, 1, &s->cl_area_rel, err) != RP_OK)
+        return rp_error_set(err, RP_ERR_INPUT, "--cluster-area: '%s' is not auto or a number in [0, 1]", ca);
     s->cluster_rays = (unsigned)crays;
     s->cluster_face_rays = (unsigned)cfrays;
     const char *cm = rp_options_word(o, "cluster"); /* defaults: the specs' */
