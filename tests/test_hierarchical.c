@@ -1368,6 +1368,46 @@ Test(hier, refuses_bad_options, .init = hsetup)
     rp_scene_destroy(scene);
 }
 
+/* --cluster-area auto follows what the run is asked for (hierarchical.c
+ * hier_init): 3e-3 of the lit area for surface averages alone, 1e-3 for an
+ * image or for both; a number given is kept, and a word that is neither is
+ * refused with an error that names auto. */
+Test(hier, cluster_area_follows_the_question, .init = hsetup)
+{
+    rp_scene *scene = rp_test_load("scenes/cube-ceiling.scene");
+    static const struct {
+        unsigned want;
+        const char *value;
+        double rel;
+    } cases[] = {
+        {RP_WANT_SURFACES, NULL, 3e-3},
+        {RP_WANT_SURFACES, "auto", 3e-3},
+        {RP_WANT_IMAGE, NULL, 1e-3},
+        {RP_WANT_IMAGE | RP_WANT_SURFACES, NULL, 1e-3},
+        {RP_WANT_SURFACES, "2e-3", 2e-3},
+        {RP_WANT_IMAGE, "0", 0},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
+        rp_error err = {""};
+        hrun r;
+        const char *kv[] = {"cluster", "on", cases[k].value ? "cluster-area" : NULL, cases[k].value, NULL};
+        cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, cases[k].want, 1, kv, &err), RP_OK, "%s",
+                     err.message);
+        const hier_state *s = r.state;
+        cr_assert_eq(s->cl_area_rel, cases[k].rel, "case %zu: %g, not %g", k, s->cl_area_rel, cases[k].rel);
+        cr_assert_float_eq(s->cl_area, cases[k].rel * s->lit_area, 1e-15 * s->lit_area, "case %zu", k);
+        hrun_end(&r);
+    }
+    rp_error err = {""};
+    hrun r;
+    const char *bad[] = {"cluster", "on", "cluster-area", "some", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_SURFACES, 1, bad, &err), RP_ERR_INPUT);
+    cr_assert(strstr(err.message, "--cluster-area") && strstr(err.message, "'some'") && strstr(err.message, "auto"),
+              "%s", err.message);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
 /* ---- clustering (Smits, Arvo & Greenberg 1994) ------------------------- */
 
 /* The unit box seen from inside with every wall cut into an n x n grid of
