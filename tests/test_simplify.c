@@ -173,13 +173,13 @@ static void keep_log(void *ctx, const char *msg)
 
 /* Wall and lamp average radiance and the image, solved by hierarchical
  * radiosity with --simplify `mode`. */
-static void solve_sphere(const rp_scene *scene, const rp_solver_type *type, const char *mode, double *surf,
-                         float *img)
+static rp_solver *solve_sphere_wanting(const rp_scene *scene, const rp_solver_type *type, const char *mode,
+                                       unsigned want)
 {
     int hr = type == &rp_solver_hierarchical;
     const char *keys[] = {"simplify", "spp", hr ? "bf-epsilon" : "reconstruct"},
                *vals[] = {mode, "4", hr ? "0.02" : "gouraud"};
-    rp_options o = {.size = sizeof o, .want = RP_WANT_IMAGE | RP_WANT_SURFACES, .seed = 3, .threads = 0,
+    rp_options o = {.size = sizeof o, .want = want, .seed = 3, .threads = 0,
                     .keys = keys, .values = vals, .count = 3, .log = keep_log};
     rp_solver *s = NULL;
     rp_error err = {""};
@@ -192,6 +192,14 @@ static void solve_sphere(const rp_scene *scene, const rp_solver_type *type, cons
             break;
         cr_assert(k < 10000);
     }
+    return s;
+}
+
+static void solve_sphere(const rp_scene *scene, const rp_solver_type *type, const char *mode, double *surf,
+                         float *img)
+{
+    rp_solver *s = solve_sphere_wanting(scene, type, mode, RP_WANT_IMAGE | RP_WANT_SURFACES);
+    rp_error err = {""};
     rp_estimate e = {.radiance = img, .surface_radiance = surf};
     cr_assert_eq(rp_solver_estimate(s, &e, &err), RP_OK, "%s", err.message);
     rp_solver_destroy(s);
@@ -267,6 +275,22 @@ Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
                   L_wall);
         cr_assert(lo > 0.85 * L_wall && hi < 1.15 * L_wall, "%s %s: pixels %g .. %g, closed form %g", types[k]->name,
                   modes[k], lo, hi, L_wall);
+    }
+    /* Surface averages alone (probe): the camera's raycaster over the full
+     * mesh is not built, the answer still holds, and an image is refused
+     * by name rather than drawn without it. */
+    for (int k = 0; k < 3; k++) {
+        if (k == 0)
+            continue; /* without --simplify the camera uses the method's raycaster */
+        rp_solver *s = solve_sphere_wanting(scene, types[k], modes[k], RP_WANT_SURFACES);
+        rp_estimate e = {.surface_radiance = surf};
+        cr_assert_eq(rp_solver_estimate(s, &e, &err), RP_OK, "%s", err.message);
+        cr_assert(fabs(surf[0] / L_wall - 1) < 0.02, "%s %s, surfaces alone: wall %g, closed form %g",
+                  types[k]->name, modes[k], surf[0], L_wall);
+        e = (rp_estimate){.radiance = img, .surface_radiance = surf};
+        cr_assert_eq(rp_solver_estimate(s, &e, &err), RP_ERR_UNSUPPORTED, "%s: an image was drawn", types[k]->name);
+        cr_assert(strstr(err.message, "only for surface averages"), "%s", err.message);
+        rp_solver_destroy(s);
     }
     free(img);
     rp_scene_destroy(scene);

@@ -642,10 +642,12 @@ rp_status hier_image(const hier_state *s, float *out, float *variance, double *r
 {
     if (!rp_scene_camera(s->view.scene))
         return rp_error_set(err, RP_ERR_INPUT, "the scene has no camera to render from");
+    rp_status st = rp_recon_view_check(&s->view, err);
+    if (st != RP_OK)
+        return st;
     const size_t nb = s->nb;
     img_job job = {.s = s};
     hier_vertices *hv = NULL;
-    rp_status st = RP_OK;
     if (s->recon == HIER_RECON_GOURAUD) {
         if ((st = hier_vertices_create(s, &hv, err)) != RP_OK)
             return st;

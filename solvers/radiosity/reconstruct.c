@@ -470,6 +470,8 @@ rp_status rp_recon_image(const rp_scene *scene, const rp_mesh *mesh, const rp_ra
                          float *variance, double *rays, rp_error *err)
 {
     rp_status st = recon_check(scene, nb, err);
+    if (st == RP_OK)
+        st = rp_recon_view_check(&p->view, err);
     if (st != RP_OK)
         return st;
     if (p->spp == 0 || (p->mode == RP_RECON_GATHER && p->gather_rays == 0))
@@ -537,10 +539,24 @@ rp_status rp_recon_view_rays(rp_recon_view *v, const rp_options *o, rp_raycast *
         v->rc = rc;
         return RP_OK;
     }
+    /* Only the camera looks at the full scene: a run that asks for surface
+     * averages alone (probe) does without its raycaster, whose BVH is most
+     * of what the full mesh costs (about 9 MB for the bunny's 75k
+     * triangles); rp_recon_view_check refuses an image then. */
+    if (o && o->want && !(o->want & RP_WANT_IMAGE))
+        return RP_OK;
     rp_status st = rp_raycast_create(v->scene, NULL, &v->rc, err);
     if (st == RP_OK)
         st = rp_options_ray_offset(o, v->rc, err);
     return st;
+}
+
+rp_status rp_recon_view_check(const rp_recon_view *v, rp_error *err)
+{
+    if (v->sol && !v->rc)
+        return rp_error_set(err, RP_ERR_UNSUPPORTED,
+                            "an image from a run that asked only for surface averages (options.want)");
+    return RP_OK;
 }
 
 void rp_recon_view_fini(rp_recon_view *v)

@@ -52,8 +52,12 @@ typedef struct rp_recon_view {
 rp_status rp_recon_view_init(rp_recon_view *v, const rp_options *o, const rp_scene *scene, const rp_scene **solve,
                              rp_error *err);
 /* The camera's raycaster: the method's rc, or with --simplify one over the
- * full scene (with o's --ray-offset), owned by v. */
+ * full scene (with o's --ray-offset), owned by v; none when o->want asks
+ * for no image. */
 rp_status rp_recon_view_rays(rp_recon_view *v, const rp_options *o, rp_raycast *rc, rp_error *err);
+/* RP_ERR_UNSUPPORTED when v has no camera raycaster (an image was not
+ * wanted at init). */
+rp_status rp_recon_view_check(const rp_recon_view *v, rp_error *err);
 /* Releases what the two made (v zeroed or half made is fine). */
 void rp_recon_view_fini(rp_recon_view *v);
 
