@@ -854,17 +854,23 @@ static void pool_trim(void **pool, size_t size, size_t n, size_t *cap, uint32_t 
 }
 
 /* Pools hold dead entries (F = 0) where links went or clusters drew
- * again; once they are a quarter of a pool (with all, once there are
+ * again; once they are an eighth of a pool (with all, once there are
  * any), it is compacted in place (in link order for the node pool, start
- * order for the cluster pool: the order the live entries already have)
- * and its storage trimmed. */
-static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
+ * order for the cluster pool: the order the live entries already have,
+ * so when it happens changes no sum) and its storage trimmed.  Compacting
+ * costs a pass over the pool (0.6% of the bunny scene's solve at an
+ * eighth); at a quarter the bunny scene peaked 1.4 MB higher. */
+#define POOL_DEAD_SHARE 8
+
+/* The node pool, its links links[0..nl) (those not evaluated yet, count
+ * HIER_CL_NONE, have no entries). */
+static void compact_node_pool(hier_state *s, hier_clink *links, size_t nl, int all)
 {
-    if (all ? s->ncl_ndead > 0 : 4 * s->ncl_ndead > s->ncl_nent) {
+    if (all ? s->ncl_ndead > 0 : POOL_DEAD_SHARE * s->ncl_ndead > s->ncl_nent) {
         size_t at = 0;
         for (size_t k = 0; k < nl; k++) {
             hier_clink *l = &links[k];
-            if (!is_node(l->recv))
+            if (!is_node(l->recv) || l->count == HIER_CL_NONE)
                 continue;
             uint32_t f = l->first, c = l->count, n = 0;
             for (uint32_t j = 0; j < c; j++)
@@ -878,32 +884,26 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
         s->ncl_ndead = 0;
         pool_trim((void **)&s->cl_nent, sizeof *s->cl_nent, s->ncl_nent, &s->cap_cl_nent, NULL, NULL);
     }
-    if (all ? s->ncl_cdead > 0 : 4 * s->ncl_cdead > s->ncl_cent) {
+}
+
+static void compact_cluster_pool(hier_state *s, int all)
+{
+    if (all ? s->ncl_cdead > 0 : POOL_DEAD_SHARE * s->ncl_cdead > s->ncl_cent) {
         /* Clusters' ranges are not in pool order once some drew again:
-         * order them by their start, then move down. */
+         * order them by their start (sorting the clusters, not marking
+         * the pool: a pool-sized array was 3.3 MB of the bunny scene's
+         * peak), then move down. */
         size_t at = 0;
-        uint32_t *ord = malloc((s->ncl ? s->ncl : 1) * sizeof *ord);
+        uint64_t *ord = malloc((s->ncl ? s->ncl : 1) * sizeof *ord);
         if (!ord)
             return; /* compacted another time */
         size_t no = 0;
         for (size_t c = 0; c < s->ncl; c++)
             if (s->cl_ecount[c])
-                ord[no++] = (uint32_t)c;
-        /* A counting pass over the pool marks each live range's owner:
-         * ranges do not overlap, so sorting by start is a bucket fill. */
-        uint32_t *owner = malloc((s->ncl_cent ? s->ncl_cent : 1) * sizeof *owner);
-        if (!owner) {
-            free(ord);
-            return;
-        }
-        for (size_t k = 0; k < s->ncl_cent; k++)
-            owner[k] = RP_NONE;
-        for (size_t i = 0; i < no; i++)
-            owner[s->cl_efirst[ord[i]]] = ord[i];
-        for (size_t k = 0; k < s->ncl_cent; k++) {
-            uint32_t c = owner[k];
-            if (c == RP_NONE)
-                continue;
+                ord[no++] = (uint64_t)s->cl_efirst[c] << 32 | c;
+        qsort(ord, no, sizeof *ord, u64_cmp);
+        for (size_t i = 0; i < no; i++) {
+            uint32_t c = (uint32_t)ord[i];
             uint32_t f = s->cl_efirst[c], n = s->cl_ecount[c], m = 0;
             for (uint32_t j = 0; j < n; j++)
                 if (s->cl_cent[f + j].F != 0) {
@@ -913,9 +913,7 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
             s->cl_efirst[c] = (uint32_t)at;
             s->cl_ecount[c] = m;
             at += m;
-            k = (size_t)f + n - 1;
         }
-        free(owner);
         free(ord);
         s->ncl_cent = at;
         s->ncl_cdead = 0;
@@ -923,11 +921,17 @@ static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
     }
 }
 
+static void compact_pools(hier_state *s, hier_clink *links, size_t nl, int all)
+{
+    compact_node_pool(s, links, nl, all);
+    compact_cluster_pool(s, all);
+}
+
 /* Scratch is bounded: new work is done in chunks of about this many
- * receiving elements (links received by nodes, or faces).  8192 faces
- * draw about 135k samples (2.2 MB); 32768 took 8.8 MB, the bunny scene's
- * peak 121 MiB against 109 MiB, in no less time. */
-#define EVAL_CHUNK 8192
+ * receiving elements (links received by nodes, or faces).  2048 faces
+ * draw about 34k samples (0.5 MB); 32768 took 8.8 MB, the bunny scene's
+ * peak 121 MiB against 109 MiB, and 8192 2.2 MB, in no less time. */
+#define EVAL_CHUNK 2048
 
 /* Evaluates the links refinement kept: the new ones get their unoccluded
  * estimate, those received by nodes their entries, and every cluster
@@ -955,6 +959,8 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     for (long k = 0; k < (long)nl; k++)
         if (!is_node(links[k].recv) && links[k].Fu < 0)
             links[k].Fu = (float)link_unoccluded(s, links[k].recv, links[k].src);
+    /* The entries of the links that went die first. */
+    compact_node_pool(s, links, nl, 0);
     /* New links received by nodes: entries, a chunk at a time. */
     for (size_t k0 = 0; k0 < nl;) {
         size_t nnew = 0, k1 = k0;
@@ -1084,6 +1090,10 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
                     goto nomem;
             s->cl_ecount[c] = (uint32_t)(s->ncl_cent - s->cl_efirst[c]);
         }
+        /* The draws replace entries that die: compacting as they go keeps
+         * the pool near its live size (compacted at the end of the pass
+         * alone, it held the old draws and the new ones together). */
+        compact_cluster_pool(s, 0);
         c0 = c1;
     }
     goto done;
