@@ -201,6 +201,15 @@ done:
     return RP_OK;
 }
 
+void rp_solution_drop_maps(rp_solution *sol)
+{
+    free(sol->face_map);
+    free(sol->vtx_face);
+    free(sol->vtx_w);
+    sol->face_map = sol->vtx_face = NULL;
+    sol->vtx_w = NULL;
+}
+
 const rp_scene *rp_solution_scene(const rp_solution *sol) { return sol->scene; }
 size_t rp_solution_nsimplified(const rp_solution *sol) { return sol->nsimplified; }
 double rp_solution_max_distance(const rp_solution *sol) { return sol->max_distance; }

@@ -247,7 +247,8 @@ rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_e
  * reads the option: *out is NULL when it is off, else the
  * solution mesh to solve on (rp_solution_scene), which the caller destroys
  * with rp_solution_destroy.  Messages (what each mesh became) go to
- * o->log. */
+ * o->log.  When o->want asks for no image, the solution has no maps back
+ * to the full scene (rp_solution_drop_maps). */
 #define RP_SIMPLIFY_OPTION(fallback)                                                         \
     {"simplify", "off|auto|R",                                                                \
      "solve on a simplified copy of each triangle mesh of 1000 triangles or more (CGAL edge " \
