@@ -1126,6 +1126,8 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     rp_status st = RP_OK;
     hier_clink *work = NULL, *kept = NULL, *cand = NULL;
     hier_link *flinks = NULL, *fcand = NULL;
+    uint32_t *flinks_r = NULL; /* the face-level links' receivers */
+    size_t capflr = 0;
     unsigned char *act = NULL, *code = NULL, *dirty = NULL;
     uint32_t *pairs = NULL;
     uint64_t *rm = NULL; /* (cluster << 32 | source) of stored links that go */
@@ -1276,8 +1278,10 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
                 continue;
             }
             s->form_factors++;
-            if (!hier_grow((void **)&flinks, &capfl, nfl + 1, sizeof *flinks))
+            if (!hier_grow((void **)&flinks, &capfl, nfl + 1, sizeof *flinks) ||
+                !hier_grow((void **)&flinks_r, &capflr, nfl + 1, sizeof *flinks_r))
                 goto nomem;
+            flinks_r[nfl] = pairs[2 * t];
             flinks[nfl++] = fcand[t];
         }
         hier_clink *t = work;
@@ -1310,7 +1314,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
     }
     /* Also with nfl 0: the nodes this pass split for cluster links need
      * their (empty) runs of face-level links (hier_link.c). */
-    if ((st = hier_links_add(s, flinks, nfl, err)) != RP_OK)
+    if ((st = hier_links_add(s, flinks, flinks_r, nfl, err)) != RP_OK)
         goto done;
     if (first) {
         s->clinks_initial = s->nclinks;
@@ -1326,6 +1330,7 @@ done:
     free(kept);
     free(cand);
     free(flinks);
+    free(flinks_r);
     free(fcand);
     free(act);
     free(code);

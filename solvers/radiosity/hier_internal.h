@@ -71,13 +71,14 @@ enum {
  * so they add up to exactly one (hier_link_set_shares). */
 #define HIER_SHARE_ONE 65535u
 
-/* A one-way link: the receiver gathers rho F B_src through it.  24 bytes:
- * links are most of the method's memory (the bunny scene: 1.06M links,
- * 0.75M cluster links, 2.6M cluster entries), and single precision is
+/* A one-way link: the receiver gathers rho F B_src through it.  20 bytes:
+ * links are most of the method's memory (the bunny scene: 0.5M links,
+ * 0.4M cluster links, 1M cluster entries), and single precision is
  * ample for one link's form factor and shares (their sums are taken in
- * double). */
+ * double).  The receiver is not stored: the list is sorted by it
+ * (link_start), and links not yet in the list carry theirs beside them. */
 typedef struct hier_link {
-    uint32_t recv, src;
+    uint32_t src;
     float F;          /* form-factor estimate times visibility */
     float F_err;      /* the oracle's form-factor bound (unoccluded estimate
                          for partial or straddling links) */
@@ -251,7 +252,8 @@ typedef struct hier_state {
                             each node's row sum times ff_scale (update_scale) */
     size_t cap_scale;
 
-    hier_link *links;    /* sorted by receiver after every refinement pass */
+    hier_link *links;    /* sorted by receiver after every refinement pass,
+                            which is where each one's receiver is known from */
     size_t nlinks, cap_links;
     uint32_t *link_start; /* nnodes + 1 offsets into links (CSR by receiver) */
     size_t cap_start;
@@ -429,8 +431,9 @@ static inline rp_vec3 hier_ring_dir(rp_vec3 n, rp_vec3 t, rp_vec3 b, double thet
 
 /* Evaluates face-level link q <- p (0: none, 1: link, 2: every ray blocked). */
 int hier_link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *out, double *rays);
-/* Appends n face-level links and re-sorts the list by receiver. */
-rp_status hier_links_add(hier_state *s, const hier_link *add, size_t n, rp_error *err);
+/* Appends n face-level links add[k] received by recv[k] and re-sorts the
+ * list by receiver. */
+rp_status hier_links_add(hier_state *s, const hier_link *add, const uint32_t *recv, size_t n, rp_error *err);
 
 /* ---- hier_cluster.c ---- */
 

@@ -174,11 +174,12 @@ static int receiver_rule(const hier_node *q, rp_vec3 x[4], double w[4])
     return 4;
 }
 
-/* The coupling coefficients of link l (K[0][0] = F), see the top. */
-static void link_coefficients(const hier_state *s, const hier_link *l, float out[8])
+/* The coupling coefficients of link qi <- l->src (K[0][0] = F), see the
+ * top. */
+static void link_coefficients(const hier_state *s, uint32_t qi, const hier_link *l, float out[8])
 {
-    const hier_node *q = &s->nodes[l->recv], *p = &s->nodes[l->src];
-    const hier_basis *bq = &s->basis[l->recv], *bp = &s->basis[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
+    const hier_basis *bq = &s->basis[qi], *bp = &s->basis[l->src];
     const rp_vec3 nq = s->faces[q->face].n;
     const int src_linear = s->faces[p->face].reflects; /* a pure emitter is uniform */
     hier_node quarter[4];
@@ -259,7 +260,7 @@ rp_status hier_linear_links(hier_state *s, rp_error *err)
         fresh += !(s->links[k].flags & HIER_LINK_COEF);
     if (fresh == 0)
         return RP_OK;
-    uint32_t *todo = malloc(fresh * sizeof *todo);
+    uint32_t *todo = malloc(2 * fresh * sizeof *todo), *todo_r = todo + fresh; /* links, their receivers */
     if (!todo)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu linear links", nl);
     /* Slots of links since replaced are dead: when they would be more than
@@ -290,15 +291,17 @@ rp_status hier_linear_links(hier_state *s, rp_error *err)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for %zu linear links", nl);
     }
     size_t n = 0;
-    for (size_t k = 0; k < nl; k++)
-        if (!(s->links[k].flags & HIER_LINK_COEF)) {
-            todo[n++] = (uint32_t)k;
-            hier_link_set_slot(&s->links[k], (uint32_t)s->nlin_K++);
-        }
+    for (uint32_t i = 0; i < s->nnodes; i++)
+        for (uint32_t k = s->link_start[i]; k < s->link_start[i + 1]; k++)
+            if (!(s->links[k].flags & HIER_LINK_COEF)) {
+                todo[n] = k;
+                todo_r[n++] = i;
+                hier_link_set_slot(&s->links[k], (uint32_t)s->nlin_K++);
+            }
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64)
     for (long t = 0; t < (long)n; t++) {
         const hier_link *l = &s->links[todo[t]];
-        link_coefficients(s, l, s->lin_K + (size_t)hier_link_slot(l) * 8);
+        link_coefficients(s, todo_r[t], l, s->lin_K + (size_t)hier_link_slot(l) * 8);
     }
     free(todo);
     return RP_OK;

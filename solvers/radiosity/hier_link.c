@@ -278,11 +278,11 @@ static double value_rays(const hier_state *s, const link_rays *set, const hier_n
     return link_rays_cast(s, set, hier_key(s->seed ^ HIER_VALUE_KEY, q->id, p->id), &open, &valid, rays);
 }
 
-/* Completes a link link_eval left pending, whose unoccluded form factor
- * is F: l->F = F x the value's visible fraction. */
-static void link_value(const hier_state *s, hier_link *l, double F, double *rays)
+/* Completes a link qi <- l->src link_eval left pending, whose unoccluded
+ * form factor is F: l->F = F x the value's visible fraction. */
+static void link_value(const hier_state *s, uint32_t qi, hier_link *l, double F, double *rays)
 {
-    const hier_node *q = &s->nodes[l->recv], *p = &s->nodes[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
     link_rays set;
     link_rays_prepare(&set, q, p, &s->faces[q->face], &s->faces[p->face], (l->flags & HIER_LINK_STRADDLE) != 0);
     l->F = (float)(F * value_rays(s, &set, q, p, rays));
@@ -391,7 +391,6 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
     double vis = 1;
     uint32_t flags = straddle ? HIER_LINK_STRADDLE : 0;
     *Fu = F;
-    out->recv = qi;
     out->src = pi;
     if (shaft_blocked(s, q, p)) {
         flags |= HIER_LINK_TESTED;
@@ -488,13 +487,17 @@ static rp_status links_fit(hier_state *s, size_t n, rp_error *err)
 }
 
 /* The list becomes links[0..m) (sorted by receiver, as the last merge left
- * them) and add[0..n) (any order, not in the list's storage), sorted by
- * receiver and stable: each receiver's kept links, then its new ones in
- * the order given.  The new links' order is a counting sort of indices
- * (ord), merged in from the back of the list, so the list is never held
- * twice (a second sorted copy of it was 36 MiB of the bunny scene's 135
- * MiB peak).  Builds link_start. */
-static rp_status links_merge(hier_state *s, size_t m, const hier_link *add, size_t n, rp_error *err)
+ * them; link_start holds their offsets for the first mn nodes, the others
+ * have none) and add[0..n) received by recv[0..n) (any order, not in the
+ * list's storage), sorted by receiver and stable: each receiver's kept
+ * links, then its new ones in the order given.  The new links' order is a
+ * counting sort of indices (ord); each receiver's kept links are moved up
+ * to their place and its new ones copied after them, from the last
+ * receiver down, so the list is never held twice (a second sorted copy of
+ * it was 36 MiB of the bunny scene's 135 MiB peak).  Completes
+ * link_start. */
+static rp_status links_merge(hier_state *s, size_t m, size_t mn, const hier_link *add, const uint32_t *recv, size_t n,
+                             rp_error *err)
 {
     const size_t nn = s->nnodes;
     rp_status st;
@@ -504,36 +507,46 @@ static rp_status links_merge(hier_state *s, size_t m, const hier_link *add, size
         return st;
     uint32_t *start = s->link_start;
     hier_link *links = s->links;
+    if (mn == 0)
+        start[0] = 0;
+    for (size_t i = mn + 1; i <= nn; i++)
+        start[i] = (uint32_t)m;
     if (n > 0) {
+        /* nstart[r]: where receiver r's new links start among the new
+         * ones; fill[r] the next free place while ord is filled. */
         uint32_t *ord = malloc(n * sizeof *ord);
-        if (!ord)
+        uint32_t *nstart = calloc(2 * (nn + 1), sizeof *nstart);
+        if (!ord || !nstart) {
+            free(ord);
+            free(nstart);
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory sorting %zu links", n);
-        memset(start, 0, (nn + 1) * sizeof *start);
+        }
+        uint32_t *fill = nstart + nn + 1;
         for (size_t k = 0; k < n; k++)
-            start[add[k].recv + 1]++;
+            nstart[recv[k] + 1]++;
         for (size_t i = 0; i < nn; i++)
-            start[i + 1] += start[i];
+            nstart[i + 1] += nstart[i];
+        memcpy(fill, nstart, nn * sizeof *fill);
         for (size_t k = 0; k < n; k++)
-            ord[start[add[k].recv]++] = (uint32_t)k;
-        /* From the back: on a tie the new link goes last. */
-        size_t i = m, j = n, w = m + n;
-        while (j > 0) {
-            const hier_link *b = &add[ord[j - 1]];
-            if (i > 0 && links[i - 1].recv > b->recv)
-                links[--w] = links[--i];
-            else {
-                links[--w] = *b;
-                j--;
-            }
+            ord[fill[recv[k]]++] = (uint32_t)k;
+        /* From the last receiver down: receiver r's kept links
+         * [start[r], start[r + 1]) move up by the new links of the
+         * receivers before it (nstart[r]), its own new ones follow them.
+         * Both land at or above where r's kept links were, so nothing
+         * not yet moved is overwritten. */
+        for (size_t r = nn; r-- > 0;) {
+            const size_t lo = start[r], mc = start[r + 1] - lo, nc = nstart[r + 1] - nstart[r];
+            const size_t at = lo + nstart[r];
+            if (mc && at != lo)
+                memmove(links + at, links + lo, mc * sizeof *links);
+            for (size_t j = 0; j < nc; j++)
+                links[at + mc + j] = add[ord[nstart[r] + j]];
+            start[r + 1] = (uint32_t)(at + mc + nc);
         }
         free(ord);
+        free(nstart);
     }
     n += m;
-    memset(start, 0, (nn + 1) * sizeof *start);
-    for (size_t k = 0; k < n; k++)
-        start[links[k].recv + 1]++;
-    for (size_t i = 0; i < nn; i++)
-        start[i + 1] += start[i];
     s->start_nn = nn;
     s->nlinks = n;
     size_t partial = 0;
@@ -552,7 +565,7 @@ static rp_status hier_links_cover(hier_state *s, rp_error *err)
     if (s->link_start && s->start_nn == nn)
         return RP_OK;
     if (!s->link_start) /* no merge yet (a clustered scene's first pass, no links) */
-        return links_merge(s, s->nlinks, NULL, 0, err);
+        return links_merge(s, s->nlinks, 0, NULL, NULL, 0, err);
     /* Nodes are never removed, so start_nn < nn here.  Nodes made since
      * the last sort (the split end of a cluster link, hier_cluster.c) have
      * no face-level links yet (links change only through links_merge):
@@ -572,11 +585,11 @@ static rp_status hier_links_cover(hier_state *s, rp_error *err)
     return RP_OK;
 }
 
-rp_status hier_links_add(hier_state *s, const hier_link *add, size_t n, rp_error *err)
+rp_status hier_links_add(hier_state *s, const hier_link *add, const uint32_t *recv, size_t n, rp_error *err)
 {
     if (n == 0)
         return hier_links_cover(s, err);
-    return links_merge(s, s->nlinks, add, n, err);
+    return links_merge(s, s->nlinks, s->link_start ? s->start_nn : 0, add, recv, n, err);
 }
 
 rp_status hier_link_initial(hier_state *s, rp_error *err)
@@ -588,7 +601,8 @@ rp_status hier_link_initial(hier_state *s, rp_error *err)
     hier_link *buf = malloc(R * n * sizeof *buf);
     unsigned char *code = malloc(R * n);
     hier_link *links = NULL;
-    size_t nl = 0, cap = 0;
+    uint32_t *recv = NULL;
+    size_t nl = 0, cap = 0, capr = 0;
     rp_status st = RP_OK;
     if (!buf || !code) {
         st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for the initial links");
@@ -612,23 +626,29 @@ rp_status hier_link_initial(hier_state *s, rp_error *err)
             s->form_factors++;
             if ((st = reserve_links(&links, &cap, nl + 1, err)) != RP_OK)
                 goto done;
+            if (!hier_grow((void **)&recv, &capr, nl + 1, sizeof *recv)) {
+                st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for the initial links");
+                goto done;
+            }
+            recv[nl] = (uint32_t)(i0 + k / n);
             links[nl++] = buf[k];
         }
     }
-    st = links_merge(s, 0, links, nl, err);
+    st = links_merge(s, 0, 0, links, recv, nl, err);
 done:
     free(buf);
     free(code);
     free(links);
+    free(recv);
     return st;
 }
 
-/* The refinement decision for one link: 0 keep, 1 split the receiver,
- * 2 split the source. */
-static int decide(const hier_state *s, const hier_link *l)
+/* The refinement decision for link qi <- l->src: 0 keep, 1 split the
+ * receiver, 2 split the source. */
+static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
 {
     const size_t nb = s->nb;
-    const hier_node *q = &s->nodes[l->recv], *p = &s->nodes[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
     const double *rho = s->faces[q->face].rho;
     const double *Bp = s->B + (size_t)l->src * nb;
     double e = 0;
@@ -638,7 +658,7 @@ static int decide(const hier_state *s, const hier_link *l)
          * all blocked: the oracle's "keep" drops it for good, and the
          * light of a penumbra its rays missed with it, so it goes only
          * as deep as without importance. */
-        e = hier_importance_error(s, rho, s->B + (size_t)l->recv * nb, s->Y + (size_t)l->recv * nb,
+        e = hier_importance_error(s, rho, s->B + (size_t)qi * nb, s->Y + (size_t)qi * nb,
                                   s->faces[p->face].rho, Bp, s->Y + (size_t)l->src * nb);
     else
         for (size_t b = 0; b < nb; b++)
@@ -671,9 +691,9 @@ static int decide(const hier_state *s, const hier_link *l)
 
 /* A source near enough to the receiver that the kernel varies across it
  * (the same test link_eval uses to integrate over the receiver). */
-static int near_pair(const hier_state *s, const hier_link *l)
+static int near_pair(const hier_state *s, uint32_t qi, const hier_link *l)
 {
-    const hier_node *q = &s->nodes[l->recv], *p = &s->nodes[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
     rp_vec3 d = rp_v3_sub(p->c, q->c);
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(q);
 }
@@ -712,11 +732,18 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 {
     *refined = 0;
     rp_status st = RP_OK;
+    /* The stored links' receivers are read from their offsets: those must
+     * cover every node (they do after any pass). */
+    if ((st = hier_links_cover(s, err)) != RP_OK)
+        return st;
     const size_t nn0 = s->nnodes, nl0 = s->nlinks;
     hier_link *orig = s->links;
     const uint32_t *ostart = s->link_start;
     unsigned char *oact = NULL;   /* per stored link: 0 kept, 1 split, 3 dropped */
     hier_link *fresh = NULL, *kept = NULL, *splitl = NULL, *cand = NULL;
+    /* their receivers (the stored links' are known from ostart) */
+    uint32_t *fresh_r = NULL, *kept_r = NULL, *split_r = NULL, *cand_r = NULL;
+    size_t capfr = 0, capkr = 0, capsr = 0, capcr = 0;
     double *freshF = NULL, *candF = NULL; /* unoccluded form factors of pending links */
     unsigned char *fact = NULL, *kdead = NULL, *mark = NULL, *smode = NULL, *code = NULL;
     size_t capf = 0, capk = 0, caps = 0, capc = 0, capfa = 0, capkd = 0, capm = 0, capsm = 0, capcode = 0;
@@ -728,11 +755,12 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     if (!oact)
         goto nomem;
     size_t nsplit = 0;
-#pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsplit) if (nl0 > 8192)
-    for (long k = 0; k < (long)nl0; k++) {
-        oact[k] = (unsigned char)decide(s, &orig[k]);
-        nsplit += oact[k] != 0;
-    }
+#pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) reduction(+ : nsplit) if (nl0 > 8192)
+    for (long i = 0; i < (long)nn0; i++)
+        for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++) {
+            oact[k] = (unsigned char)decide(s, (uint32_t)i, &orig[k]);
+            nsplit += oact[k] != 0;
+        }
     for (size_t k = 0; k < nl0; k++)
         if (!oact[k] && (orig[k].flags & HIER_LINK_INVISIBLE) && !(orig[k].F > 0)) {
             /* An invisible link the oracle would not refine is dropped:
@@ -756,12 +784,14 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
         size_t ns = 0;
         /* Splits, in a fixed order: node numbers and random keys must not
          * depend on threads. */
-#define ADD_SPLIT(L, MODE)                                                         \
+#define ADD_SPLIT(R, L, MODE)                                                      \
     do {                                                                           \
         if (!hier_grow((void **)&splitl, &caps, ns + 1, sizeof *splitl) ||              \
+            !hier_grow((void **)&split_r, &capsr, ns + 1, sizeof *split_r) ||           \
             !hier_grow((void **)&smode, &capsm, ns + 1, 1))                             \
             goto nomem;                                                            \
         splitl[ns] = (L);                                                          \
+        split_r[ns] = (R);                                                         \
         smode[ns] = (unsigned char)(MODE);                                         \
         ns++;                                                                      \
     } while (0)
@@ -773,18 +803,21 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
              * unchanged, the kernel of a near source, which varies across
              * the receiver, would give the children next to the source
              * too little and the others too much. */
-            for (size_t k = 0; k < nl0; k++)
-                if (oact[k] == 1)
-                    mark[orig[k].recv] = 1;
-            for (size_t k = 0; k < nl0; k++)
-                if (oact[k] == 0 && mark[orig[k].recv] && near_pair(s, &orig[k]))
-                    oact[k] = 1;
-            for (size_t k = 0; k < nl0; k++)
-                if (oact[k] == 1 || oact[k] == 2) {
-                    mark[orig[k].recv] = 0;
-                    ADD_SPLIT(orig[k], oact[k]);
-                    oact[k] = 1; /* gone from the stored list */
-                }
+            for (uint32_t i = 0; i < nn0; i++)
+                for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++)
+                    if (oact[k] == 1)
+                        mark[i] = 1;
+            for (uint32_t i = 0; i < nn0; i++)
+                for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++)
+                    if (oact[k] == 0 && mark[i] && near_pair(s, i, &orig[k]))
+                        oact[k] = 1;
+            for (uint32_t i = 0; i < nn0; i++)
+                for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++)
+                    if (oact[k] == 1 || oact[k] == 2) {
+                        mark[i] = 0;
+                        ADD_SPLIT(i, orig[k], oact[k]);
+                        oact[k] = 1; /* gone from the stored list */
+                    }
         } else {
             if (nfresh == 0)
                 break;
@@ -793,15 +826,15 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             size_t nsp = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(static) reduction(+ : nsp) if (nfresh > 8192)
             for (long k = 0; k < (long)nfresh; k++) {
-                fact[k] = (unsigned char)decide(s, &fresh[k]);
+                fact[k] = (unsigned char)decide(s, fresh_r[k], &fresh[k]);
                 nsp += fact[k] != 0;
             }
             if (nsp) {
                 for (size_t k = 0; k < nfresh; k++)
                     if (fact[k] == 1)
-                        mark[fresh[k].recv] = 1;
+                        mark[fresh_r[k]] = 1;
                 for (size_t k = 0; k < nfresh; k++)
-                    if (fact[k] == 0 && mark[fresh[k].recv] && near_pair(s, &fresh[k]))
+                    if (fact[k] == 0 && mark[fresh_r[k]] && near_pair(s, fresh_r[k], &fresh[k]))
                         fact[k] = 1;
             }
             /* The oracle has decided: the links it keeps cast their
@@ -811,52 +844,57 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64) reduction(+ : vrays) if (nfresh > 256)
             for (long k = 0; k < (long)nfresh; k++)
                 if (!fact[k] && (fresh[k].flags & HIER_LINK_PENDING))
-                    link_value(s, &fresh[k], freshF[k], &vrays);
+                    link_value(s, fresh_r[k], &fresh[k], freshF[k], &vrays);
             s->rays += vrays;
             for (size_t k = 0; k < nfresh; k++)
                 if (fact[k])
-                    ADD_SPLIT(fresh[k], fact[k]);
+                    ADD_SPLIT(fresh_r[k], fresh[k], fact[k]);
             if (nsp) {
                 /* Near links of the split receivers that an earlier round
                  * kept, then stored ones (found through link_start). */
                 memset(kdead, 0, nkept);
                 for (size_t k = 0; k < nkept; k++)
-                    if (mark[kept[k].recv] == 1 && near_pair(s, &kept[k])) {
+                    if (mark[kept_r[k]] == 1 && near_pair(s, kept_r[k], &kept[k])) {
                         kdead[k] = 1;
-                        ADD_SPLIT(kept[k], 1);
+                        ADD_SPLIT(kept_r[k], kept[k], 1);
                     }
                 for (size_t k = 0; k < nfresh; k++) {
-                    uint32_t r = fresh[k].recv;
+                    uint32_t r = fresh_r[k];
                     if (fact[k] != 1 || mark[r] != 1)
                         continue;
                     mark[r] = 2;
                     if (r >= nn0)
                         continue;
                     for (uint32_t j = ostart[r]; j < ostart[r + 1]; j++)
-                        if (oact[j] == 0 && near_pair(s, &orig[j])) {
+                        if (oact[j] == 0 && near_pair(s, r, &orig[j])) {
                             oact[j] = 1;
-                            ADD_SPLIT(orig[j], 1);
+                            ADD_SPLIT(r, orig[j], 1);
                         }
                 }
                 for (size_t k = 0; k < nfresh; k++)
-                    mark[fresh[k].recv] = 0;
+                    mark[fresh_r[k]] = 0;
                 size_t m = 0;
                 for (size_t k = 0; k < nkept; k++)
-                    if (!kdead[k])
+                    if (!kdead[k]) {
+                        kept_r[m] = kept_r[k];
                         kept[m++] = kept[k];
+                    }
                 nkept = m;
             }
             /* What this round keeps joins the kept list; an invisible link
              * the oracle would not refine is dropped. */
-            if (!hier_grow((void **)&kept, &capk, nkept + nfresh, sizeof *kept))
+            if (!hier_grow((void **)&kept, &capk, nkept + nfresh, sizeof *kept) ||
+                !hier_grow((void **)&kept_r, &capkr, nkept + nfresh, sizeof *kept_r))
                 goto nomem;
             for (size_t k = 0; k < nfresh; k++) {
                 if (fact[k])
                     continue;
                 if ((fresh[k].flags & HIER_LINK_INVISIBLE) && !(fresh[k].F > 0))
                     s->links_invisible++;
-                else
+                else {
+                    kept_r[nkept] = fresh_r[k];
                     kept[nkept++] = fresh[k];
+                }
             }
             nfresh = 0;
             if (ns == 0)
@@ -865,7 +903,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 #undef ADD_SPLIT
         changed = 1;
         for (size_t t = 0; t < ns; t++) {
-            uint32_t node = smode[t] == 1 ? splitl[t].recv : splitl[t].src;
+            uint32_t node = smode[t] == 1 ? split_r[t] : splitl[t].src;
             if ((st = hier_subdivide(s, node, err)) != RP_OK)
                 goto done;
         }
@@ -875,11 +913,13 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
          * block at a time (all 4 ns at once took the Cornell box at 83k
          * leaves to 279 MiB, not 256), then kept in order. */
         if (!hier_grow((void **)&fresh, &capf, ns * 4, sizeof *fresh) ||
+            !hier_grow((void **)&fresh_r, &capfr, ns * 4, sizeof *fresh_r) ||
             !hier_grow((void **)&freshF, &capfF, ns * 4, sizeof *freshF))
             goto nomem;
         for (size_t t0 = 0; t0 < ns * 4; t0 += HIER_SLOT_BLOCK) {
             const size_t nb = ns * 4 - t0 < HIER_SLOT_BLOCK ? ns * 4 - t0 : HIER_SLOT_BLOCK;
             if (!hier_grow((void **)&cand, &capc, nb, sizeof *cand) || !hier_grow((void **)&code, &capcode, nb, 1) ||
+                !hier_grow((void **)&cand_r, &capcr, nb, sizeof *cand_r) ||
                 !hier_grow((void **)&candF, &capcF, nb, sizeof *candF))
                 goto nomem;
             double rays = 0;
@@ -888,11 +928,12 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                 const size_t t = t0 + (size_t)i;
                 const hier_link *l = &splitl[t / 4];
                 uint32_t c = (uint32_t)(t % 4);
-                uint32_t qi = l->recv, pi = l->src;
+                uint32_t qi = split_r[t / 4], pi = l->src;
                 if (smode[t / 4] == 1)
                     qi = s->nodes[qi].child + c;
                 else
                     pi = s->nodes[pi].child + c;
+                cand_r[i] = qi;
                 code[i] = (unsigned char)link_eval(s, qi, pi, &cand[i], &candF[i], &rays, 1);
             }
             s->rays += rays;
@@ -901,19 +942,28 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                     continue;
                 s->form_factors++;
                 freshF[nfresh] = candF[i];
+                fresh_r[nfresh] = cand_r[i];
                 fresh[nfresh++] = cand[i];
             }
         }
     }
     s->refine_passes++;
     if (changed) {
-        /* The stored links that stay, then the new ones, sorted by
-         * receiver (stable: old links first, new ones in creation order). */
+        /* The stored links that stay (their offsets rewritten in place),
+         * then the new ones, sorted by receiver (stable: old links first,
+         * new ones in creation order). */
+        uint32_t *start = s->link_start;
         size_t m = 0;
-        for (size_t k = 0; k < nl0; k++)
-            if (oact[k] == 0)
-                orig[m++] = orig[k];
-        st = links_merge(s, m, kept, nkept, err);
+        for (size_t i = 0, lo = 0; i < nn0; i++) {
+            const size_t hi = start[i + 1];
+            start[i] = (uint32_t)m;
+            for (size_t k = lo; k < hi; k++)
+                if (oact[k] == 0)
+                    orig[m++] = orig[k];
+            lo = hi;
+        }
+        start[nn0] = (uint32_t)m;
+        st = links_merge(s, m, nn0, kept, kept_r, nkept, err);
     } else {
         /* An idle pass (the usual one near convergence): the list's room
          * beyond its links is given back (a pass that dropped links left
@@ -933,6 +983,10 @@ nomem:
 done:
     free(oact);
     free(fresh);
+    free(fresh_r);
+    free(kept_r);
+    free(split_r);
+    free(cand_r);
     free(freshF);
     free(candF);
     free(kept);

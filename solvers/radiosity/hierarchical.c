@@ -692,13 +692,13 @@ void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, 
     }
 }
 
-static void source_value(const hier_state *s, hier_link *l, const double *X, double *out)
+static void source_value(const hier_state *s, uint32_t qi, hier_link *l, const double *X, double *out)
 {
     const hier_node *p = &s->nodes[l->src];
     /* --basis linear: the source's own linear function carries what the
      * shares would (hier_linear.c), and share[] holds the link's slot. */
     if (p->child != RP_NONE && !(l->flags & (HIER_LINK_SHARES | HIER_LINK_COEF)) && !s->linear) {
-        const hier_node *q = &s->nodes[l->recv];
+        const hier_node *q = &s->nodes[qi];
         rp_vec3 n = s->faces[q->face].n, np = s->faces[p->face].n;
         double w[4], ws = 0;
         rp_vec3 dp = rp_v3_sub(p->c, q->c);
@@ -725,7 +725,10 @@ static void source_value(const hier_state *s, hier_link *l, const double *X, dou
     hier_source_mean(s, l, X, out);
 }
 
-static void source_radiosity(const hier_state *s, hier_link *l, double *out) { source_value(s, l, s->B, out); }
+static void source_radiosity(const hier_state *s, uint32_t qi, hier_link *l, double *out)
+{
+    source_value(s, qi, l, s->B, out);
+}
 
 /* One Jacobi sweep: gather over every node's links, then push-pull.
  * Returns the relative energy change. */
@@ -781,7 +784,7 @@ static double hier_sweep(hier_state *s)
             acc[b] = 0;
         for (uint32_t k = start[qi]; k < start[qi + 1]; k++) {
             double Bp[HIER_MAX_BANDS];
-            source_radiosity(s, &links[k], Bp);
+            source_radiosity(s, (uint32_t)qi, &links[k], Bp);
             double F = links[k].F;
             for (size_t b = 0; b < nb; b++)
                 acc[b] += F * Bp[b];
@@ -887,7 +890,7 @@ static void importance_sweep(hier_state *s)
             acc[b] = 0;
         for (uint32_t k = start[qi]; k < start[qi + 1]; k++) {
             double Yp[HIER_MAX_BANDS];
-            source_value(s, &links[k], Y, Yp);
+            source_value(s, (uint32_t)qi, &links[k], Y, Yp);
             const double *rho = s->faces[s->nodes[links[k].src].face].rho;
             double F = links[k].F;
             for (size_t b = 0; b < nb; b++)
