@@ -32,9 +32,7 @@ void rp_solution_destroy(rp_solution *sol)
     if (!sol)
         return;
     rp_scene_destroy(sol->scene);
-    free(sol->face_map);
-    free(sol->vtx_face);
-    free(sol->vtx_w);
+    rp_solution_drop_maps(sol);
     free(sol);
 }
 

@@ -359,6 +359,11 @@ int rp_options_cancelled(const rp_options *o)
     return o && rp_cancelled(o->cancel);
 }
 
+int rp_options_image_unwanted(const rp_options *o)
+{
+    return o && o->want && !(o->want & RP_WANT_IMAGE);
+}
+
 rp_status rp_options_simplify(const rp_options *o, const rp_scene *scene, struct rp_solution **out, rp_error *err)
 {
     *out = NULL;
@@ -373,7 +378,7 @@ rp_status rp_options_simplify(const rp_options *o, const rp_scene *scene, struct
             return rp_error_set(err, RP_ERR_INPUT, "--simplify: '%s' is not off, auto or a fraction in (0, 1)", sm);
     }
     rp_status st = rp_solution_create(scene, ratio, 0, out, o ? o->log : NULL, o ? o->log_ctx : NULL, err);
-    if (st == RP_OK && o && o->want && !(o->want & RP_WANT_IMAGE))
+    if (st == RP_OK && rp_options_image_unwanted(o))
         rp_solution_drop_maps(*out);
     return st;
 }

@@ -90,6 +90,9 @@ static inline int rp_cancelled(const atomic_int *cancel)
 #endif
 /* The same for a method's options, from C or C++ (o may be NULL). */
 int rp_options_cancelled(const rp_options *o);
+/* 1 when o says what the run wants and an image is not part of it (0 for
+ * o NULL or want 0: nothing said, so an image may be asked for). */
+int rp_options_image_unwanted(const rp_options *o);
 
 /* Work done by one step (added up by the harness). */
 typedef struct rp_step_info {

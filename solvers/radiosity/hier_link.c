@@ -718,6 +718,15 @@ int hier_grow(void **a, size_t *cap, size_t need, size_t size)
     return 1;
 }
 
+/* The pair of split link r <- l's child c: the receiver's child (mode 1)
+ * with the source, or the receiver with the source's child. */
+static void split_child(const hier_state *s, uint32_t r, const hier_link *l, unsigned char mode, uint32_t c,
+                        uint32_t *qi, uint32_t *pi)
+{
+    *qi = mode == 1 ? s->nodes[r].child + c : r;
+    *pi = mode == 1 ? l->src : s->nodes[l->src].child + c;
+}
+
 /* Child links hier_refine evaluates at once (33 bytes of slot each). */
 #define HIER_SLOT_BLOCK ((size_t)1 << 16)
 
@@ -742,8 +751,8 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     unsigned char *oact = NULL;   /* per stored link: 0 kept, 1 split, 3 dropped */
     hier_link *fresh = NULL, *kept = NULL, *splitl = NULL, *cand = NULL;
     /* their receivers (the stored links' are known from ostart) */
-    uint32_t *fresh_r = NULL, *kept_r = NULL, *split_r = NULL, *cand_r = NULL;
-    size_t capfr = 0, capkr = 0, capsr = 0, capcr = 0;
+    uint32_t *fresh_r = NULL, *kept_r = NULL, *split_r = NULL;
+    size_t capfr = 0, capkr = 0, capsr = 0;
     double *freshF = NULL, *candF = NULL; /* unoccluded form factors of pending links */
     unsigned char *fact = NULL, *kdead = NULL, *mark = NULL, *smode = NULL, *code = NULL;
     size_t capf = 0, capk = 0, caps = 0, capc = 0, capfa = 0, capkd = 0, capm = 0, capsm = 0, capcode = 0;
@@ -919,21 +928,14 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
         for (size_t t0 = 0; t0 < ns * 4; t0 += HIER_SLOT_BLOCK) {
             const size_t nb = ns * 4 - t0 < HIER_SLOT_BLOCK ? ns * 4 - t0 : HIER_SLOT_BLOCK;
             if (!hier_grow((void **)&cand, &capc, nb, sizeof *cand) || !hier_grow((void **)&code, &capcode, nb, 1) ||
-                !hier_grow((void **)&cand_r, &capcr, nb, sizeof *cand_r) ||
                 !hier_grow((void **)&candF, &capcF, nb, sizeof *candF))
                 goto nomem;
             double rays = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 16) reduction(+ : rays) if (nb > 256)
             for (long i = 0; i < (long)nb; i++) {
                 const size_t t = t0 + (size_t)i;
-                const hier_link *l = &splitl[t / 4];
-                uint32_t c = (uint32_t)(t % 4);
-                uint32_t qi = split_r[t / 4], pi = l->src;
-                if (smode[t / 4] == 1)
-                    qi = s->nodes[qi].child + c;
-                else
-                    pi = s->nodes[pi].child + c;
-                cand_r[i] = qi;
+                uint32_t qi, pi;
+                split_child(s, split_r[t / 4], &splitl[t / 4], smode[t / 4], (uint32_t)(t % 4), &qi, &pi);
                 code[i] = (unsigned char)link_eval(s, qi, pi, &cand[i], &candF[i], &rays, 1);
             }
             s->rays += rays;
@@ -941,8 +943,11 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                 if (code[i] == 0)
                     continue;
                 s->form_factors++;
+                const size_t t = t0 + i;
+                uint32_t qi, pi;
+                split_child(s, split_r[t / 4], &splitl[t / 4], smode[t / 4], (uint32_t)(t % 4), &qi, &pi);
                 freshF[nfresh] = candF[i];
-                fresh_r[nfresh] = cand_r[i];
+                fresh_r[nfresh] = qi;
                 fresh[nfresh++] = cand[i];
             }
         }
@@ -986,7 +991,6 @@ done:
     free(fresh_r);
     free(kept_r);
     free(split_r);
-    free(cand_r);
     free(freshF);
     free(candF);
     free(kept);

@@ -543,7 +543,7 @@ rp_status rp_recon_view_rays(rp_recon_view *v, const rp_options *o, rp_raycast *
      * averages alone (probe) does without its raycaster, whose BVH is most
      * of what the full mesh costs (about 9 MB for the bunny's 75k
      * triangles); rp_recon_view_check refuses an image then. */
-    if (o && o->want && !(o->want & RP_WANT_IMAGE))
+    if (rp_options_image_unwanted(o))
         return RP_OK;
     rp_status st = rp_raycast_create(v->scene, NULL, &v->rc, err);
     if (st == RP_OK)
