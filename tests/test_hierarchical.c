@@ -2059,6 +2059,54 @@ Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout
     temp_ball_remove(&ball);
 }
 
+/* A link is 16 bytes: the oracle's bound in 16 bits and three shares of
+ * 13 bits (or a 32-bit slot) in five bytes.  The bound must stay a bound,
+ * at most 2^-7 above the value over the whole range a bound takes (the
+ * closed form of rounding up to 8 bits of mantissa); the shares must be
+ * whole steps of 1/8191 adding up to exactly 8191 of them, each within one
+ * step of what was stored (they are rounded through their running sum); a
+ * slot must come back whole, its top bit included. */
+Test(hier, link_packing_keeps_bounds_shares_and_slots, .init = hsetup)
+{
+    cr_assert_eq(sizeof(hier_link), 16);
+    cr_assert_eq(hier_bound_unpack(hier_bound_pack(0)) > 0, 1, "0 must pack as judged");
+    for (double b = 1e-35; b < 1e6; b *= 1.0007) {
+        double u = hier_bound_unpack(hier_bound_pack(b));
+        cr_assert(u >= b && u <= b * (1 + 0x1p-7), "bound %.17g packs as %.17g", b, u);
+    }
+    uint64_t x = 12345;
+    for (int t = 0; t < 100000; t++) {
+        double w[4], sum = 0;
+        for (int k = 0; k < 4; k++) {
+            x = x * 6364136223846793005ull + 1442695040888963407ull;
+            w[k] = (double)(x >> 11) * 0x1p-53;
+            w[k] = t % 7 == 0 && k == t % 4 ? 0 : w[k]; /* some zero shares */
+            sum += w[k];
+        }
+        for (int k = 0; k < 4; k++)
+            w[k] /= sum;
+        hier_link l = {.flags = HIER_LINK_PARTIAL};
+        hier_link_set_shares(&l, w);
+        cr_assert_eq(l.flags, HIER_LINK_PARTIAL | HIER_LINK_SHARES);
+        double r[4], steps = 0;
+        hier_link_shares(&l, r);
+        for (int k = 0; k < 4; k++) {
+            cr_assert(fabs(r[k] - w[k]) <= 1.0 / HIER_SHARE_ONE, "share %d: %.9f stored as %.9f", k, w[k], r[k]);
+            double n = r[k] * HIER_SHARE_ONE;
+            cr_assert(fabs(n - nearbyint(n)) < 1e-9, "share %d is not a whole number of steps: %.17g", k, n);
+            steps += nearbyint(n);
+        }
+        cr_assert_eq(steps, (double)HIER_SHARE_ONE, "shares add up to %g steps", steps);
+    }
+    const uint32_t slots[] = {0, 1, 8191, 65536, 0x7fffffffu, 0xffffffffu};
+    for (size_t k = 0; k < sizeof slots / sizeof *slots; k++) {
+        hier_link l = {.flags = HIER_LINK_STRADDLE};
+        hier_link_set_slot(&l, slots[k]);
+        cr_assert_eq(hier_link_slot(&l), slots[k]);
+        cr_assert_eq(l.flags, HIER_LINK_STRADDLE | HIER_LINK_COEF);
+    }
+}
+
 /* After every step the receiver offsets of the face-level links cover
  * every node, and a node's run holds exactly the links it receives: the
  * gather sweep walks link_start over all nodes.  Nodes made by splitting

@@ -424,25 +424,6 @@ static int node_can_split(const hier_state *s, uint32_t it)
 
 /* A form-factor bound in (0, 1] in 16 bits: the upper half of its float,
  * rounded up, so the bound stays a bound (at most 2^-7 above it). */
-static uint16_t fb_pack(double Fb)
-{
-    float f = (float)Fb;
-    if ((double)f < Fb)
-        f = nextafterf(f, 2.0f);
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    u = (u >> 16) + ((u & 0xffffu) != 0);
-    return (uint16_t)(u ? u : 1);
-}
-
-static double fb_unpack(uint16_t b)
-{
-    uint32_t u = (uint32_t)b << 16;
-    float f;
-    memcpy(&f, &u, sizeof f);
-    return f;
-}
-
 /* 0 keep, 1 split the receiver, 2 the source, 3 both, 4 drop.  A link's
  * bound depends on the geometry alone: judged when the link was made and
  * kept in it (l->Fb), it is not judged again at every pass (stored cluster
@@ -452,9 +433,9 @@ static int cl_decide(const hier_state *s, const hier_clink *l)
     double Fb = 0;
     int j = l->Fb ? 1 : judge(s, l->recv, l->src, &Fb);
     if (l->Fb)
-        Fb = fb_unpack(l->Fb);
+        Fb = hier_bound_unpack(l->Fb);
     else if (j == 1)
-        Fb = fb_unpack(fb_pack(Fb)); /* as it will be read at the next pass */
+        Fb = hier_bound_unpack(hier_bound_pack(Fb)); /* as it will be read at the next pass */
     if (j < 0)
         return 4;
     if (j == 1) {
@@ -1262,7 +1243,7 @@ rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err)
             cand[t].Fu = -1;
             cand[t].count = HIER_CL_NONE;
             int j = judge(s, r, src, &Fb);
-            cand[t].Fb = j == 1 ? fb_pack(Fb) : 0;
+            cand[t].Fb = j == 1 ? hier_bound_pack(Fb) : 0;
             code[t] = j < 0 ? 0 : 3;
         }
         s->rays += rays;

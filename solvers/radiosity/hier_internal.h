@@ -9,6 +9,7 @@
 #include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "../../geometry/raycast.h"
 #include "../../geometry/scene.h"
@@ -66,26 +67,31 @@ enum {
                                      does not read F */
 };
 
-/* A link's shares of its source's four children are kept in 16 bits as
- * multiples of 1/HIER_SHARE_ONE; the fourth is what the first three leave,
- * so they add up to exactly one (hier_link_set_shares). */
-#define HIER_SHARE_ONE 65535u
+/* A link's shares of its source's four children are kept in 13 bits each
+ * as multiples of 1/HIER_SHARE_ONE; the fourth is what the first three
+ * leave, so they add up to exactly one (hier_link_set_shares). */
+#define HIER_SHARE_ONE 8191u
+#define HIER_SHARE_BITS 13
 
-/* A one-way link: the receiver gathers rho F B_src through it.  20 bytes:
+/* A one-way link: the receiver gathers rho F B_src through it.  16 bytes:
  * links are most of the method's memory (the bunny scene: 0.5M links,
- * 0.4M cluster links, 1M cluster entries), and single precision is
- * ample for one link's form factor and shares (their sums are taken in
+ * 0.4M cluster links, 1M cluster entries; the Cornell box at 83k leaves
+ * 7.7M links), and single precision is ample for one link's form factor,
+ * the oracle's bound needs 8 bits of mantissa (rounded up, so it stays a
+ * bound) and a share of a source's child 13 bits (their sums are taken in
  * double).  The receiver is not stored: the list is sorted by it
  * (link_start), and links not yet in the list carry theirs beside them. */
 typedef struct hier_link {
     uint32_t src;
     float F;          /* form-factor estimate times visibility */
-    float F_err;      /* the oracle's form-factor bound (unoccluded estimate
-                         for partial or straddling links) */
-    uint16_t share[3]; /* the source's children 0-2 in the kernel seen from
-                          the receiver's centre, when flags has
-                          HIER_LINK_SHARES; child 3 has the rest */
-    uint16_t flags;
+    uint16_t F_err;   /* the oracle's form-factor bound (unoccluded estimate
+                         for partial or straddling links), packed by
+                         hier_bound_pack: read it with hier_link_ferr */
+    uint8_t flags;
+    uint8_t share[5]; /* three 13-bit shares of the source's children 0-2
+                         in the kernel seen from the receiver's centre, when
+                         flags has HIER_LINK_SHARES (child 3 has the rest);
+                         or, with HIER_LINK_COEF, a 32-bit slot */
 } hier_link;
 
 /* --basis linear (hier_linear.c): a node's linear basis functions
@@ -150,7 +156,7 @@ typedef struct hier_clink {
                            cluster receiver */
     uint16_t Fb;        /* the oracle's form-factor bound (geometry only,
                            so judged once), rounded up to 8 bits of
-                           mantissa (hier_cluster.c fb_pack); 0 when not
+                           mantissa (hier_bound_pack); 0 when not
                            yet judged */
 } hier_clink;
 
@@ -561,6 +567,46 @@ static inline double hier_extent2(const hier_node *nd)
     return 0.25 * d2 > nd->area ? 0.25 * d2 : nd->area;
 }
 
+/* A nonnegative bound in 16 bits: the upper half of its float, rounded
+ * up, so that it stays a bound, at most 2^-7 above (8 bits of mantissa,
+ * the full exponent range); 0 packs as the smallest denormal, so that 0
+ * can mean "not judged" (hier_clink.Fb). */
+static inline uint16_t hier_bound_pack(double b)
+{
+    float f = (float)b;
+    if ((double)f < b)
+        f = nextafterf(f, INFINITY);
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    u = (u >> 16) + ((u & 0xffffu) != 0);
+    return (uint16_t)(u ? u : 1);
+}
+
+static inline double hier_bound_unpack(uint16_t b)
+{
+    uint32_t u = (uint32_t)b << 16;
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+static inline double hier_link_ferr(const hier_link *l) { return hier_bound_unpack(l->F_err); }
+
+/* The 40 bits of l->share as one number, and back. */
+static inline uint64_t hier_link_share_bits(const hier_link *l)
+{
+    uint64_t v = 0;
+    for (int k = 4; k >= 0; k--)
+        v = v << 8 | l->share[k];
+    return v;
+}
+
+static inline void hier_link_set_share_bits(hier_link *l, uint64_t v)
+{
+    for (int k = 0; k < 5; k++, v >>= 8)
+        l->share[k] = (uint8_t)(v & 0xffu);
+}
+
 /* Stores shares w[0..3] (>= 0, adding up to one) in l: each is rounded
  * through the running sum, so none is negative and they add up to
  * HIER_SHARE_ONE exactly. */
@@ -568,25 +614,26 @@ static inline void hier_link_set_shares(hier_link *l, const double w[4])
 {
     double run = 0;
     uint32_t prev = 0;
+    uint64_t v = 0;
     for (int k = 0; k < 3; k++) {
         run += w[k];
         double c = floor(run * HIER_SHARE_ONE + 0.5);
         uint32_t ck = c <= prev ? prev : (c >= HIER_SHARE_ONE ? HIER_SHARE_ONE : (uint32_t)c);
-        l->share[k] = (uint16_t)(ck - prev);
+        v |= (uint64_t)(ck - prev) << (HIER_SHARE_BITS * k);
         prev = ck;
     }
+    hier_link_set_share_bits(l, v);
     l->flags |= HIER_LINK_SHARES;
 }
 
-/* --basis linear: link l's slot in lin_K, kept in share[0..1]. */
+/* --basis linear: link l's slot in lin_K, kept in share[0..3]. */
 static inline void hier_link_set_slot(hier_link *l, uint32_t slot)
 {
-    l->share[0] = (uint16_t)(slot & 0xffffu);
-    l->share[1] = (uint16_t)(slot >> 16);
+    hier_link_set_share_bits(l, slot);
     l->flags |= HIER_LINK_COEF;
 }
 
-static inline uint32_t hier_link_slot(const hier_link *l) { return (uint32_t)l->share[0] | ((uint32_t)l->share[1] << 16); }
+static inline uint32_t hier_link_slot(const hier_link *l) { return (uint32_t)hier_link_share_bits(l); }
 
 /* --basis linear: a linear function with coefficients L on a node,
  * restricted to its child (two-scale relation a, A: hier_linear_relation):
@@ -603,9 +650,11 @@ static inline double hier_linear_restrict(const double a[2], const double A[2][2
 static inline void hier_link_shares(const hier_link *l, double w[4])
 {
     uint32_t rest = HIER_SHARE_ONE;
-    for (int k = 0; k < 3; k++) {
-        w[k] = (double)l->share[k] / HIER_SHARE_ONE;
-        rest -= l->share[k];
+    uint64_t v = hier_link_share_bits(l);
+    for (int k = 0; k < 3; k++, v >>= HIER_SHARE_BITS) {
+        uint32_t sk = (uint32_t)(v & HIER_SHARE_ONE);
+        w[k] = (double)sk / HIER_SHARE_ONE;
+        rest -= sk;
     }
     w[3] = (double)rest / HIER_SHARE_ONE;
 }

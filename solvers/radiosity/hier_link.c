@@ -286,7 +286,7 @@ static void link_value(const hier_state *s, uint32_t qi, hier_link *l, double F,
     link_rays set;
     link_rays_prepare(&set, q, p, &s->faces[q->face], &s->faces[p->face], (l->flags & HIER_LINK_STRADDLE) != 0);
     l->F = (float)(F * value_rays(s, &set, q, p, rays));
-    l->flags = (uint16_t)(l->flags & ~HIER_LINK_PENDING);
+    l->flags = (uint8_t)(l->flags & ~HIER_LINK_PENDING);
 }
 
 /* Evaluates link q <- p into *out.  Returns 0 if there is no link (the two
@@ -420,24 +420,24 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
                 vis = value_rays(s, &set, q, p, rays);
         }
     }
-    out->share[0] = out->share[1] = out->share[2] = 0;
+    hier_link_set_share_bits(out, 0);
     out->F = flags & HIER_LINK_PENDING ? 0.0f : (float)(F * vis);
+    double F_err = Fmax;
     if (flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE))
-        out->F_err = (float)(s->partial_weight * Fmax);
+        F_err = s->partial_weight * Fmax;
     else if (emitter)
         /* A pure emitter is uniform and the contour integral exact over it:
          * the estimate's error is the kernel's variation across q. */
-        out->F_err = (float)Fvar;
-    else
-        out->F_err = (float)Fmax;
+        F_err = Fvar;
     if (flags & HIER_LINK_INVISIBLE)
         /* Refined towards a penumbra it may hide, but with the weight
          * --invisible-weight (default 1/4 = 1/sqrt(16)): N stratified rays
          * that were all blocked leave a visible fraction of about
          * 1/sqrt(N) undetected at most, not the whole unoccluded form
          * factor. */
-        out->F_err = (float)(s->invisible_weight * Fmax);
-    out->flags = (uint16_t)flags;
+        F_err = s->invisible_weight * Fmax;
+    out->F_err = hier_bound_pack(F_err);
+    out->flags = (uint8_t)flags;
     return (flags & HIER_LINK_INVISIBLE) && !(vis > 0) && !(flags & HIER_LINK_PENDING) ? 2 : 1;
 }
 
@@ -667,7 +667,7 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
      * error in the power they receive instead of their radiosity
      * (Smits, Arvo & Greenberg 1994, sec. 4): e x F x A_q / cl_area. */
     double scale = s->clustering ? hier_min(1.0, q->area / s->cl_area) : 1.0;
-    if (!(e * l->F_err * scale > s->bf_eps))
+    if (!(e * hier_link_ferr(l) * scale > s->bf_eps))
         return 0;
     /* Pairs where one element crosses the other's plane meet along a
      * line (a box standing on the floor) or nearly: there the kernel is
