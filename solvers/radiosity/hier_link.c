@@ -718,13 +718,13 @@ int hier_grow(void **a, size_t *cap, size_t need, size_t size)
     return 1;
 }
 
-/* The pair of split link r <- l's child c: the receiver's child (mode 1)
- * with the source, or the receiver with the source's child. */
-static void split_child(const hier_state *s, uint32_t r, const hier_link *l, unsigned char mode, uint32_t c,
+/* The pair of split link r <- src's child c: the receiver's child (mode
+ * 1) with the source, or the receiver with the source's child. */
+static void split_child(const hier_state *s, uint32_t r, uint32_t src, unsigned char mode, uint32_t c,
                         uint32_t *qi, uint32_t *pi)
 {
     *qi = mode == 1 ? s->nodes[r].child + c : r;
-    *pi = mode == 1 ? l->src : s->nodes[l->src].child + c;
+    *pi = mode == 1 ? src : s->nodes[src].child + c;
 }
 
 /* Child links hier_refine evaluates at once (33 bytes of slot each). */
@@ -749,9 +749,10 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     hier_link *orig = s->links;
     const uint32_t *ostart = s->link_start;
     unsigned char *oact = NULL;   /* per stored link: 0 kept, 1 split, 3 dropped */
-    hier_link *fresh = NULL, *kept = NULL, *splitl = NULL, *cand = NULL;
-    /* their receivers (the stored links' are known from ostart) */
-    uint32_t *fresh_r = NULL, *kept_r = NULL, *split_r = NULL;
+    hier_link *fresh = NULL, *kept = NULL, *cand = NULL;
+    /* their receivers (the stored links' are known from ostart); a split
+     * link is its receiver, its source and its mode alone */
+    uint32_t *fresh_r = NULL, *kept_r = NULL, *split_r = NULL, *split_s = NULL;
     size_t capfr = 0, capkr = 0, capsr = 0;
     double *freshF = NULL, *candF = NULL; /* unoccluded form factors of pending links */
     unsigned char *fact = NULL, *kdead = NULL, *mark = NULL, *smode = NULL, *code = NULL;
@@ -795,11 +796,11 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
          * depend on threads. */
 #define ADD_SPLIT(R, L, MODE)                                                      \
     do {                                                                           \
-        if (!hier_grow((void **)&splitl, &caps, ns + 1, sizeof *splitl) ||              \
-            !hier_grow((void **)&split_r, &capsr, ns + 1, sizeof *split_r) ||           \
-            !hier_grow((void **)&smode, &capsm, ns + 1, 1))                             \
+        if (!hier_grow((void **)&split_s, &caps, ns + 1, sizeof *split_s) ||       \
+            !hier_grow((void **)&split_r, &capsr, ns + 1, sizeof *split_r) ||      \
+            !hier_grow((void **)&smode, &capsm, ns + 1, 1))                        \
             goto nomem;                                                            \
-        splitl[ns] = (L);                                                          \
+        split_s[ns] = (L).src;                                                     \
         split_r[ns] = (R);                                                         \
         smode[ns] = (unsigned char)(MODE);                                         \
         ns++;                                                                      \
@@ -912,7 +913,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 #undef ADD_SPLIT
         changed = 1;
         for (size_t t = 0; t < ns; t++) {
-            uint32_t node = smode[t] == 1 ? split_r[t] : splitl[t].src;
+            uint32_t node = smode[t] == 1 ? split_r[t] : split_s[t];
             if ((st = hier_subdivide(s, node, err)) != RP_OK)
                 goto done;
         }
@@ -935,7 +936,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             for (long i = 0; i < (long)nb; i++) {
                 const size_t t = t0 + (size_t)i;
                 uint32_t qi, pi;
-                split_child(s, split_r[t / 4], &splitl[t / 4], smode[t / 4], (uint32_t)(t % 4), &qi, &pi);
+                split_child(s, split_r[t / 4], split_s[t / 4], smode[t / 4], (uint32_t)(t % 4), &qi, &pi);
                 code[i] = (unsigned char)link_eval(s, qi, pi, &cand[i], &candF[i], &rays, 1);
             }
             s->rays += rays;
@@ -945,7 +946,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                 s->form_factors++;
                 const size_t t = t0 + i;
                 uint32_t qi, pi;
-                split_child(s, split_r[t / 4], &splitl[t / 4], smode[t / 4], (uint32_t)(t % 4), &qi, &pi);
+                split_child(s, split_r[t / 4], split_s[t / 4], smode[t / 4], (uint32_t)(t % 4), &qi, &pi);
                 freshF[nfresh] = candF[i];
                 fresh_r[nfresh] = qi;
                 fresh[nfresh++] = cand[i];
@@ -994,7 +995,7 @@ done:
     free(freshF);
     free(candF);
     free(kept);
-    free(splitl);
+    free(split_s);
     free(cand);
     free(fact);
     free(kdead);
