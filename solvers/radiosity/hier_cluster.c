@@ -422,8 +422,6 @@ static int node_can_split(const hier_state *s, uint32_t it)
     return is_node(it) && 0.25 * s->nodes[it].area >= s->min_area;
 }
 
-/* A form-factor bound in (0, 1] in 16 bits: the upper half of its float,
- * rounded up, so the bound stays a bound (at most 2^-7 above it). */
 /* 0 keep, 1 split the receiver, 2 the source, 3 both, 4 drop.  A link's
  * bound depends on the geometry alone: judged when the link was made and
  * kept in it (l->Fb), it is not judged again at every pass (stored cluster
