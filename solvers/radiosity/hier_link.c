@@ -760,6 +760,12 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     size_t capfF = 0, capcF = 0;
     size_t nfresh = 0, nkept = 0;
     int changed = 0;
+    /* What the pass uses besides the links it keeps: freed before those
+     * are merged into the list (the Cornell box at 10^6 leaves peaked 720
+     * MiB above what it held, 216 MiB since). */
+    void **scratch[] = {(void **)&oact, (void **)&fresh, (void **)&fresh_r, (void **)&freshF, (void **)&cand,
+                        (void **)&candF, (void **)&code, (void **)&fact, (void **)&kdead, (void **)&mark,
+                        (void **)&split_s, (void **)&split_r, (void **)&smode};
 
     oact = malloc(nl0 ? nl0 : 1);
     if (!oact)
@@ -969,6 +975,10 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             lo = hi;
         }
         start[nn0] = (uint32_t)m;
+        for (size_t k = 0; k < sizeof scratch / sizeof *scratch; k++) {
+            free(*scratch[k]);
+            *scratch[k] = NULL;
+        }
         st = links_merge(s, m, nn0, kept, kept_r, nkept, err);
     } else {
         /* An idle pass (the usual one near convergence): the list's room
@@ -987,20 +997,9 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 nomem:
     st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory refining links");
 done:
-    free(oact);
-    free(fresh);
-    free(fresh_r);
-    free(kept_r);
-    free(split_r);
-    free(freshF);
-    free(candF);
+    for (size_t k = 0; k < sizeof scratch / sizeof *scratch; k++)
+        free(*scratch[k]);
     free(kept);
-    free(split_s);
-    free(cand);
-    free(fact);
-    free(kdead);
-    free(mark);
-    free(smode);
-    free(code);
+    free(kept_r);
     return st;
 }
