@@ -2074,13 +2074,11 @@ Test(hier, link_packing_keeps_bounds_shares_and_slots, .init = hsetup)
         double u = hier_bound_unpack(hier_bound_pack(b));
         cr_assert(u >= b && u <= b * (1 + 0x1p-7), "bound %.17g packs as %.17g", b, u);
     }
-    uint64_t x = 12345;
     for (int t = 0; t < 100000; t++) {
         double w[4], sum = 0;
         for (int k = 0; k < 4; k++) {
-            x = x * 6364136223846793005ull + 1442695040888963407ull;
-            w[k] = (double)(x >> 11) * 0x1p-53;
-            w[k] = t % 7 == 0 && k == t % 4 ? 0 : w[k]; /* some zero shares */
+            /* uniform shares, one of them 0 in every seventh set */
+            w[k] = t % 7 == 0 && k == t % 4 ? 0 : hier_u01(hier_key(12345, (uint64_t)t, 0), (uint64_t)k);
             sum += w[k];
         }
         for (int k = 0; k < 4; k++)
