@@ -4,9 +4,9 @@
  * Edge-collapse simplification of a triangle mesh (CGAL's
  * Surface_mesh_simplification) with Garland & Heckbert's plane quadrics
  * (Garland & Heckbert 1997, "Surface simplification using quadric error
- * metrics"): each collapse costs the sum of squared distances from the new
- * vertex to the planes of the original faces around it, and collapses run
- * cheapest first.  Border edges are never collapsed, so an open mesh keeps
+ * metrics"), each plane weighed by its face's area: each collapse costs
+ * the mean squared distance from the new vertex to the planes of the
+ * original faces merged into it, and collapses run cheapest first.  Border edges are never collapsed, so an open mesh keeps
  * its outline.  Used to give radiosity a solution mesh coarser than the mesh
  * the rays hit (issue 18, "a solution mesh separate from the ray mesh").
  *
@@ -30,8 +30,9 @@ typedef struct rp_simplify_params {
      * (0, 1]; 1: no count limit. */
     double ratio;
     /* Stop before the first collapse whose quadric error exceeds
-     * tolerance^2 (an estimate of the squared distance the collapse moves
-     * the surface); 0: no error limit.  Absolute, in scene units. */
+     * tolerance^2 (the mean squared distance to the input's planes over the
+     * area the collapse merges, each plane weighed by its face's area);
+     * 0: no error limit.  Absolute, in scene units. */
     double tolerance;
 } rp_simplify_params;
 
