@@ -143,11 +143,17 @@ rp_status rp_solution_create(const rp_scene *full, double ratio, double toleranc
         sol->nsimplified++;
         double d = fmax(simp[k].max_distance_in, simp[k].max_distance_out);
         sol->max_distance = fmax(sol->max_distance, d);
+        char cut[160] = "";
+        if (simp[k].cut_points)
+            snprintf(cut, sizeof cut, "; not a 2-manifold: cut into one at %zu duplicated points", simp[k].cut_points);
+        if (simp[k].degenerate)
+            snprintf(cut + strlen(cut), sizeof cut - strlen(cut),
+                     "; %zu triangles with two corners at one position left out", simp[k].degenerate);
         rp_logf(log, log_ctx,
                 "simplify: surface '%s' %u -> %zu triangles; largest distance between the two at their vertices "
-                "%.3g (%.2g%% of the scene's diagonal)%s; %.2f s",
+                "%.3g (%.2g%% of the scene's diagonal)%s%s; %.2f s",
                 surf[k].name, surf[k].nfaces, simp[k].ntriangles, d, diag > 0 ? 100 * d / diag : 0,
-                simp[k].border_edges ? "; border edges kept" : "", seconds() - t0);
+                simp[k].border_edges ? "; border edges kept" : "", cut, seconds() - t0);
     }
     size_t dropped = 0;
     if ((st = rp_scene_with_surfaces(full, replace, &sol->scene, &dropped, err)) != RP_OK)

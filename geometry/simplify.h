@@ -22,8 +22,11 @@
  * surface about half of the time).
  *
  * Which surfaces: those of the scene's `mesh` statements (and OBJ groups)
- * with at least RP_SIMPLIFY_MIN_FACES triangles that form an oriented
- * 2-manifold; the others are kept, and a surface that cannot be simplified
+ * with at least RP_SIMPLIFY_MIN_FACES consistently wound triangles (where
+ * they are not a 2-manifold, an edge with a third triangle or parts that
+ * meet at a vertex, the shim cuts them there into one, borders kept; since
+ * stop 37: CGAL's diplodocus, two parts meeting at two points, was solved
+ * whole before); the others are kept, and a surface that cannot be simplified
  * is named in a message.  How far: `ratio` keeps that fraction of the
  * edges; `auto` (ratio 0) collapses while the mean squared distance to the
  * input's planes over the area a collapse merges stays below

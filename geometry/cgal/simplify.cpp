@@ -13,6 +13,8 @@
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_mesh_processing/orient_polygon_soup.h>
+#include <CGAL/Polygon_mesh_processing/polygon_soup_to_polygon_mesh.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Constrained_placement.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/internal/GarlandHeckbert_policy_base.h>
@@ -46,6 +48,7 @@ typedef CGAL::AABB_triangle_primitive<K, Tri_iterator> Primitive;
 typedef CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>> Tree;
 
 namespace SMS = CGAL::Surface_mesh_simplification;
+namespace PMP = CGAL::Polygon_mesh_processing;
 
 void set_msg(char *msg, size_t len, const char *fmt, ...)
 {
@@ -222,8 +225,11 @@ int simplify(const double *xyz, size_t nv, const uint32_t *tri, size_t nt, const
         mesh.add_vertex(q);
     std::vector<Triangle> input;
     input.reserve(nt);
+    std::vector<std::array<size_t, 3>> soup;
+    soup.reserve(nt);
+    size_t refused = 0, degenerate = 0;
     for (size_t f = 0; f < nt; f++) {
-        size_t w[3];
+        std::array<size_t, 3> w;
         for (int k = 0; k < 3; k++) {
             if (tri[3 * f + k] >= nv) {
                 set_msg(msg, msglen, "simplify: triangle %zu uses vertex %u of %zu", f, tri[3 * f + k], nv);
@@ -232,17 +238,55 @@ int simplify(const double *xyz, size_t nv, const uint32_t *tri, size_t nt, const
             w[k] = weld[tri[3 * f + k]];
         }
         input.emplace_back(points[w[0]], points[w[1]], points[w[2]]);
-        if (w[0] == w[1] || w[1] == w[2] || w[2] == w[0] ||
-            mesh.add_face(vertex_descriptor(static_cast<Mesh::size_type>(w[0])),
-                          vertex_descriptor(static_cast<Mesh::size_type>(w[1])),
-                          vertex_descriptor(static_cast<Mesh::size_type>(w[2]))) == Mesh::null_face()) {
+        if (w[0] == w[1] || w[1] == w[2] || w[2] == w[0]) {
+            degenerate++; /* two corners at one position: no area to keep */
+            continue;
+        }
+        soup.push_back(w);
+        if (!refused && mesh.add_face(vertex_descriptor(static_cast<Mesh::size_type>(w[0])),
+                                      vertex_descriptor(static_cast<Mesh::size_type>(w[1])),
+                                      vertex_descriptor(static_cast<Mesh::size_type>(w[2]))) == Mesh::null_face())
+            refused = f + 1;
+    }
+    if (refused) {
+        /* A scan often pinches somewhere: an edge with a third triangle, or
+         * two parts that meet at a vertex or an edge.  CGAL's
+         * orient_polygon_soup (Gueziec et al. 2001, cutting and stitching)
+         * duplicates the points there, so the soup becomes a manifold whose
+         * cuts are borders (kept by the collapse); it may also turn
+         * triangles round to make the orientation consistent, and then the
+         * simplified surface's fronts would not be the input's: refused. */
+        std::vector<Point> cut(points);
+        std::vector<std::array<size_t, 3>> oriented(soup);
+        PMP::orient_polygon_soup(cut, oriented);
+        for (size_t f = 0; f < soup.size(); f++) {
+            const std::array<size_t, 3> &a = soup[f], &b = oriented[f];
+            int same = 0;
+            for (int r = 0; r < 3 && !same; r++)
+                same = cut[b[r]] == points[a[0]] && cut[b[(r + 1) % 3]] == points[a[1]] &&
+                       cut[b[(r + 2) % 3]] == points[a[2]];
+            if (!same) {
+                set_msg(msg, msglen,
+                        "not an oriented 2-manifold: its triangle %zu has an edge shared by more than two triangles, "
+                        "or used the same way by another, or a vertex joining separate fans, and its triangles "
+                        "are not consistently wound",
+                        refused);
+                return 1;
+            }
+        }
+        mesh.clear();
+        PMP::polygon_soup_to_polygon_mesh(cut, oriented, mesh);
+        if (!is_valid_polygon_mesh(mesh) || num_faces(mesh) != soup.size()) {
             set_msg(msg, msglen,
                     "not an oriented 2-manifold: its triangle %zu has an edge shared by more than two triangles, "
-                    "or used the same way by another, or a vertex joining separate fans",
-                    f + 1);
+                    "or used the same way by another, or a vertex joining separate fans, and cutting it there "
+                    "failed",
+                    refused);
             return 1;
         }
+        out->cut_points = cut.size() - points.size();
     }
+    out->degenerate = degenerate;
 
     /* Border edges are constrained: never collapsed, their vertices never
      * moved (Constrained_placement), so an open mesh keeps its outline. */

@@ -52,6 +52,12 @@ typedef struct rp_simplified {
     double max_distance_in;
     double max_distance_out;
     size_t border_edges;    /* edges kept because they lie on a border */
+    size_t cut_points;      /* points duplicated where the input was not a
+                               2-manifold (an edge with a third triangle,
+                               parts meeting at a vertex), cut there into
+                               borders; 0 when it was one */
+    size_t degenerate;      /* input triangles with two corners at one
+                               position, left out of the collapse */
 } rp_simplified;
 
 /* Simplifies the mesh (xyz: 3 * nvertices, tri: 3 * ntriangles indices,
