@@ -255,9 +255,9 @@ rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_e
 #define RP_SIMPLIFY_OPTION(fallback)                                                         \
     {"simplify", "off|auto|R",                                                                \
      "solve on a simplified copy of each triangle mesh of 1000 triangles or more (CGAL edge " \
-     "collapse, area-weighted Garland-Heckbert quadrics; borders kept): auto collapses while "  \
-     "the root-mean-square distance to the input's planes stays below 0.02% of the scene's diagonal, R "  \
-     "in (0,1) keeps that fraction of the "                                                    \
+     "collapse, Garland-Heckbert quadrics; borders kept; cut where it is not a 2-manifold): auto " \
+     "collapses while the quadric error times the mean triangle area stays below (0.11% of "  \
+     "the scene's diagonal)^4, whatever the tessellation; R in (0,1) keeps that fraction of the " \
      "edges; camera rays and final gathers still see the full meshes",                       \
      fallback}
 struct rp_solution;

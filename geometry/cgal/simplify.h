@@ -4,9 +4,9 @@
  * Edge-collapse simplification of a triangle mesh (CGAL's
  * Surface_mesh_simplification) with Garland & Heckbert's plane quadrics
  * (Garland & Heckbert 1997, "Surface simplification using quadric error
- * metrics"), each plane weighed by its face's area: each collapse costs
- * the mean squared distance from the new vertex to the planes of the
- * original faces merged into it, and collapses run cheapest first.  Border edges are never collapsed, so an open mesh keeps
+ * metrics"): each collapse costs the sum of squared distances from the new
+ * vertex to the planes of the original faces merged into it, and collapses
+ * run cheapest first.  Border edges are never collapsed, so an open mesh keeps
  * its outline.  Used to give radiosity a solution mesh coarser than the mesh
  * the rays hit (issue 18, "a solution mesh separate from the ray mesh").
  *
@@ -29,10 +29,10 @@ typedef struct rp_simplify_params {
     /* Stop once at most this fraction of the input's edges is left, in
      * (0, 1]; 1: no count limit. */
     double ratio;
-    /* Stop before the first collapse whose quadric error exceeds
-     * tolerance^2 (the mean squared distance to the input's planes over the
-     * area the collapse merges, each plane weighed by its face's area);
-     * 0: no error limit.  Absolute, in scene units. */
+    /* Stop before the first collapse whose quadric error times the input's
+     * mean triangle area (an estimate of the squared distance integrated
+     * over the area merged) exceeds tolerance^4; 0: no error limit.  In
+     * scene units. */
     double tolerance;
 } rp_simplify_params;
 
