@@ -364,14 +364,11 @@ static const char *ms_row(const char *csv, const char *scene, const char *label)
 }
 
 /* modelsize: on a simplified solution mesh (--simplify auto) hierarchical
- * radiosity solves on far fewer faces with less memory, and its surface
- * averages stay within the seed spread of the path-traced reference at the
- * quick form's fast setting: the elephant's within 3% (its worst band over
- * seeds 1-6 at stop 37, against the 1M-sample path tracer: -1.1 to +2.4%
- * simplified, -0.6 to +6.1% on the full mesh; this asked for the full
- * mesh's error plus half a percentage point until stop 37, which one seed
- * of each can miss whichever is better on average), the bunny's within
- * 2.5%.  That is a regression check of one run (seed 1),
+ * radiosity solves on fewer faces with less memory (far fewer on the dense
+ * bunny), and its surface
+ * averages stay as close to the path-traced reference as the full mesh's
+ * (within half a percentage point); the bunny's within 2.5% at the quick
+ * form's fast setting.  That is a regression check of one run (seed 1),
  * bounded by the spread over seeds: at that setting the bunny's worst
  * band reads +0.31 to +2.45% against a 2M-sample path tracer over seeds 1
  * to 7 at stop 28, +0.37 to +1.61% at stop 31 before the cluster links
@@ -392,9 +389,13 @@ Test(experiments, modelsize_quick_form_holds_its_claim, .timeout = 900)
     const char *full = ms_row(csv, "elephant", "hierarchical:simplify=off");
     const char *simp = ms_row(csv, "elephant", "hierarchical:simplify=auto");
     const char *bunny = ms_row(csv, "bunny", "hierarchical:simplify=auto");
-    cr_expect(field(simp, 4) < 0.7 * field(full, 4), "faces %g against %g", field(simp, 4), field(full, 4));
+    /* The elephant is a coarse mesh for its size: since stop 37 auto, which
+     * bounds the error integrated over the merged area, keeps 4,644 of its
+     * 5,590 faces (3,024 before, when a fixed bound on the quadric sum let
+     * coarse meshes go further); the bunny below carries "far fewer". */
+    cr_expect(field(simp, 4) < 0.9 * field(full, 4), "faces %g against %g", field(simp, 4), field(full, 4));
     cr_expect(field(simp, 3) < field(full, 3), "memory %g against %g MiB", field(simp, 3), field(full, 3));
-    cr_expect(field(simp, 8) < 0.03, "error %g (the full mesh: %g)", field(simp, 8), field(full, 8));
+    cr_expect(field(simp, 8) < field(full, 8) + 0.005, "error %g against %g", field(simp, 8), field(full, 8));
     cr_expect(field(bunny, 4) < 0.15 * 75415, "bunny solved on %g faces", field(bunny, 4));
     cr_expect(field(bunny, 8) < 0.025, "bunny: largest surface error %g", field(bunny, 8));
     free(csv);
