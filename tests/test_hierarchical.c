@@ -1860,7 +1860,13 @@ Test(hier, cluster_elephant_against_pathtrace, .init = hsetup, .timeout = 600)
     double *h = calloc(ns * nb, sizeof *h), *pt = calloc(ns * nb, sizeof *pt), *se = calloc(ns * nb, sizeof *se);
     cr_assert(h && pt && se);
     hrun r;
-    const char *kv[] = {"bf-epsilon", "0.05", "min-area", "1e-4", NULL};
+    /* On the elephant as given (--simplify off): this checks clustering,
+     * which it predates; simplification has its own tests (test_simplify.c).
+     * With stop 37's auto (5,290 of the 5,558 faces kept) the front ceiling
+     * read -3.6% in band 2 here; at these options its value spreads over
+     * -4 to +6% across seeds 1-4 with stop 36's simplification and this
+     * one's alike (radpt probe), so one seed of it judges neither. */
+    const char *kv[] = {"bf-epsilon", "0.05", "min-area", "1e-4", "simplify", "off", NULL};
     solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
     rp_hier_stats st;
     rp_hierarchical_stats(r.state, &st);
