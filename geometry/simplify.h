@@ -91,6 +91,15 @@ void rp_solution_eval(const rp_solution *sol, size_t nb, rp_solution_eval_fn eva
  * rp_solution_eval may not be called after it. */
 void rp_solution_drop_maps(rp_solution *sol);
 
+/* Midpoint subdivision of a triangle mesh (xyz: 3 x nv, tri: 3 x nt): every
+ * triangle into four, one new vertex at the middle of each edge, so the
+ * same surface at four times the triangles (the tessellation studies of
+ * `radpt experiment modelsize`, tests/test_simplify.c).  On success *oxyz
+ * (3 x *onv) and *otri (3 x *ont) are the caller's to free; 0 when out of
+ * memory. */
+int rp_triangles_subdivide(const double *xyz, size_t nv, const uint32_t *tri, size_t nt, double **oxyz, size_t *onv,
+                           uint32_t **otri, size_t *ont);
+
 #ifdef __cplusplus
 }
 #endif

@@ -405,30 +405,13 @@ Test(simplify, tolerance_bounds_the_distance)
     rp_test_mesh_free(&m);
 }
 
-/* Midpoint subdivision: every triangle into four, nothing moves (the same
- * surface; the shim welds the midpoints the two sides of an edge share). */
+/* Midpoint subdivision (rp_triangles_subdivide): the same surface at four
+ * times the triangles. */
 static rp_test_mesh subdivided(const rp_test_mesh *m)
 {
     rp_test_mesh o = {0};
-    o.xyz = malloc(3 * (m->nv + 3 * m->nt) * sizeof *o.xyz);
-    o.tri = malloc(12 * m->nt * sizeof *o.tri);
-    cr_assert(o.xyz && o.tri);
-    memcpy(o.xyz, m->xyz, 3 * m->nv * sizeof *o.xyz);
-    o.nv = m->nv;
-    for (size_t f = 0; f < m->nt; f++) {
-        const uint32_t *t = m->tri + 3 * f;
-        uint32_t mid[3];
-        for (int k = 0; k < 3; k++) {
-            const double *a = m->xyz + 3 * t[k], *b = m->xyz + 3 * t[(k + 1) % 3];
-            for (int i = 0; i < 3; i++)
-                o.xyz[3 * o.nv + i] = (a[i] + b[i]) / 2;
-            mid[k] = (uint32_t)o.nv++;
-        }
-        rp_test_mesh_push(&o, t[0], mid[0], mid[2]);
-        rp_test_mesh_push(&o, mid[0], t[1], mid[1]);
-        rp_test_mesh_push(&o, mid[2], mid[1], t[2]);
-        rp_test_mesh_push(&o, mid[0], mid[1], mid[2]);
-    }
+    cr_assert(rp_triangles_subdivide(m->xyz, m->nv, m->tri, m->nt, &o.xyz, &o.nv, &o.tri, &o.nt));
+    cr_assert_eq(o.nt, 4 * m->nt);
     return o;
 }
 

@@ -30,6 +30,7 @@
 
 #include "geometry/cgal/simplify.h"
 #include "geometry/scene.h"
+#include "geometry/simplify.h"
 #include "solvers/radiosity/hierarchical.h"
 #include "bench/report/files.h"
 #include "bench/report/gnuplot.h"
@@ -201,57 +202,6 @@ static rp_status ms_unit(const rp_experiment_params *p, const char *key, const r
 
 /* ---- the growth family ---- */
 
-/* Midpoint subdivision: every triangle into four (the same surface). */
-static int subdivide(const double *xyz, size_t nv, const uint32_t *tri, size_t nt, double **oxyz, size_t *onv,
-                     uint32_t **otri, size_t *ont)
-{
-    /* one new vertex per edge, found through a hash of (min, max) */
-    size_t cap = 1;
-    while (cap < 6 * nt)
-        cap <<= 1;
-    uint64_t *key = malloc(cap * sizeof *key);
-    uint32_t *val = malloc(cap * sizeof *val);
-    double *x = malloc(3 * (nv + 3 * nt) * sizeof *x);
-    uint32_t *t = malloc(12 * nt * sizeof *t);
-    if (!key || !val || !x || !t) {
-        free(key), free(val), free(x), free(t);
-        return 0;
-    }
-    for (size_t i = 0; i < cap; i++)
-        key[i] = UINT64_MAX;
-    memcpy(x, xyz, 3 * nv * sizeof *x);
-    size_t n = nv;
-    for (size_t f = 0; f < nt; f++) {
-        uint32_t c[3], m[3];
-        for (int k = 0; k < 3; k++)
-            c[k] = tri[3 * f + k];
-        for (int k = 0; k < 3; k++) {
-            uint32_t a = c[k], b = c[(k + 1) % 3];
-            uint64_t kk = a < b ? ((uint64_t)a << 32 | b) : ((uint64_t)b << 32 | a);
-            size_t h = (size_t)((kk * 0x9E3779B97F4A7C15ull) >> 20) & (cap - 1);
-            while (key[h] != UINT64_MAX && key[h] != kk)
-                h = (h + 1) & (cap - 1);
-            if (key[h] == UINT64_MAX) {
-                key[h] = kk;
-                val[h] = (uint32_t)n;
-                for (int d = 0; d < 3; d++)
-                    x[3 * n + d] = 0.5 * (xyz[3 * a + d] + xyz[3 * b + d]);
-                n++;
-            }
-            m[k] = val[h];
-        }
-        const uint32_t q[12] = {c[0], m[0], m[2], m[0], c[1], m[1], m[2], m[1], c[2], m[0], m[1], m[2]};
-        memcpy(t + 12 * f, q, sizeof q);
-    }
-    free(key);
-    free(val);
-    *oxyz = x;
-    *onv = n;
-    *otri = t;
-    *ont = 4 * nt;
-    return 1;
-}
-
 /* The scene with its mesh surface at about `faces` triangles. */
 static rp_status family_member(const rp_scene *bunny, uint32_t surface, double faces, rp_scene **out,
                               char *note, size_t nn, rp_error *err)
@@ -307,7 +257,7 @@ static rp_status family_member(const rp_scene *bunny, uint32_t surface, double f
             double *nx;
             uint32_t *ntri;
             size_t nnv, nnt;
-            if (!subdivide(cx, cnv, ct, cnt, &nx, &nnv, &ntri, &nnt))
+            if (!rp_triangles_subdivide(cx, cnv, ct, cnt, &nx, &nnv, &ntri, &nnt))
                 st = rp_error_set(err, RP_ERR_NOMEM, "out of memory");
             else {
                 if (cx != xyz)
