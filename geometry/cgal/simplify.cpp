@@ -168,29 +168,27 @@ int simplify(const double *xyz, size_t nv, const uint32_t *tri, size_t nt, const
         std::vector<Point> cut(points);
         std::vector<std::array<size_t, 3>> oriented(soup);
         PMP::orient_polygon_soup(cut, oriented);
-        for (size_t f = 0; f < soup.size(); f++) {
+        const char *why = nullptr;
+        for (size_t f = 0; f < soup.size() && !why; f++) {
             const std::array<size_t, 3> &a = soup[f], &b = oriented[f];
             int same = 0;
             for (int r = 0; r < 3 && !same; r++)
                 same = cut[b[r]] == points[a[0]] && cut[b[(r + 1) % 3]] == points[a[1]] &&
                        cut[b[(r + 2) % 3]] == points[a[2]];
-            if (!same) {
-                set_msg(msg, msglen,
-                        "not an oriented 2-manifold: its triangle %zu has an edge shared by more than two triangles, "
-                        "or used the same way by another, or a vertex joining separate fans, and its triangles "
-                        "are not consistently wound",
-                        refused);
-                return 1;
-            }
+            if (!same)
+                why = "its triangles are not consistently wound";
         }
-        mesh.clear();
-        PMP::polygon_soup_to_polygon_mesh(cut, oriented, mesh);
-        if (!is_valid_polygon_mesh(mesh) || num_faces(mesh) != soup.size()) {
+        if (!why) {
+            mesh.clear();
+            PMP::polygon_soup_to_polygon_mesh(cut, oriented, mesh);
+            if (!is_valid_polygon_mesh(mesh) || num_faces(mesh) != soup.size())
+                why = "cutting it there failed";
+        }
+        if (why) {
             set_msg(msg, msglen,
                     "not an oriented 2-manifold: its triangle %zu has an edge shared by more than two triangles, "
-                    "or used the same way by another, or a vertex joining separate fans, and cutting it there "
-                    "failed",
-                    refused);
+                    "or used the same way by another, or a vertex joining separate fans, and %s",
+                    refused, why);
             return 1;
         }
         out->cut_points = cut.size() - points.size();
