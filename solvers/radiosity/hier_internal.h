@@ -23,8 +23,11 @@
 /* Without clustering, scenes with more faces are refused by default (the
  * initial linking is O(n^2)). */
 #define HIER_DEFAULT_MAX_FACES 4096
-/* Root-pair occluder lists (shaft culling) up to this many faces. */
+/* Root-pair occluder lists (shaft culling) up to this many occluder
+ * units: a face, or every face of a surface of more than
+ * HIER_CULL_GROUP_FACES faces (a mesh) as one box. */
 #define HIER_CULL_MAX_FACES 512
+#define HIER_CULL_GROUP_FACES 64
 /* A point far from a source (r^2 > ratio x source area) uses the disk
  * approximation instead of the contour integral. */
 #define HIER_DISK_RATIO 1000.0
@@ -267,10 +270,15 @@ typedef struct hier_state {
                             makes nodes ends in links_merge or
                             hier_links_cover, before anything reads it */
 
-    /* Shaft culling (Haines & Wallace 1994): for each pair of faces, the
-     * faces that may block a segment between them. */
+    /* Shaft culling (Haines & Wallace 1994): for each pair of occluder
+     * units, the units that may block a segment between them.  A unit is
+     * a face, or the faces of a large mesh together (its box). */
     int cull;
-    uint32_t *pair_off;  /* nfaces x nfaces */
+    size_t nunits;
+    uint32_t *face_unit; /* nfaces: each face's unit */
+    uint32_t *unit_face; /* nunits: the face of a one-face unit, RP_NONE for a mesh */
+    rp_vec3 *unit_lo, *unit_hi;
+    uint32_t *pair_off;  /* nunits x nunits */
     uint16_t *pair_cnt;
     uint32_t *cand;
     size_t ncand;

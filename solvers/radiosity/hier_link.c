@@ -81,21 +81,105 @@ static int face_side(const hier_state *s, const hier_node *nd, uint32_t f, int s
     return 0;
 }
 
-rp_status hier_cull_init(hier_state *s, rp_error *err)
+/* 1 if some corner of box [lo, hi] lies strictly in front of face f's
+ * plane (beyond its tolerance and tol). */
+static int box_in_front(const hier_state *s, rp_vec3 lo, rp_vec3 hi, uint32_t f, double tol)
+{
+    const hier_face *hf = &s->faces[f];
+    rp_vec3 c = rp_v3(hf->n.x > 0 ? hi.x : lo.x, hf->n.y > 0 ? hi.y : lo.y, hf->n.z > 0 ? hi.z : lo.z);
+    return rp_v3_dot(hf->n, c) - hf->d > hf->tol + tol;
+}
+
+/* The occluder units: a face of a surface of at most
+ * HIER_CULL_GROUP_FACES faces is its own unit, a larger surface (a mesh)
+ * one unit, its box.  Links between two one-face units test the listed
+ * units; a link with an end on a mesh casts its rays (the mesh may block
+ * itself).  So a room with a scanned mesh in it keeps its walls' culling:
+ * a link between two walls casts rays only when its shaft meets the
+ * mesh's box or a face that may block it.  Returns 0 when culling is off
+ * (more units than HIER_CULL_MAX_FACES). */
+static int cull_units(hier_state *s, rp_error *err, int *failed)
 {
     const size_t n = s->nfaces;
-    s->cull = n <= HIER_CULL_MAX_FACES;
+    uint32_t nsurf = 0;
+    for (size_t f = 0; f < n; f++)
+        nsurf = s->faces[f].surface + 1 > nsurf ? s->faces[f].surface + 1 : nsurf;
+    uint32_t *count = calloc(nsurf ? nsurf : 1, sizeof *count), *unit = malloc((nsurf ? nsurf : 1) * sizeof *unit);
+    if (!count || !unit) {
+        free(count);
+        free(unit);
+        *failed = 1;
+        rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for occluder lists");
+        return 0;
+    }
+    size_t nu = 0;
+    for (size_t f = 0; f < n; f++)
+        count[s->faces[f].surface]++;
+    for (uint32_t k = 0; k < nsurf; k++)
+        if (count[k] > HIER_CULL_GROUP_FACES)
+            nu++;
+    for (uint32_t k = 0; k < nsurf; k++)
+        if (count[k] <= HIER_CULL_GROUP_FACES)
+            nu += count[k];
+    if (nu > HIER_CULL_MAX_FACES) {
+        free(count);
+        free(unit);
+        return 0;
+    }
+    s->face_unit = malloc((n ? n : 1) * sizeof *s->face_unit);
+    s->unit_face = malloc((nu ? nu : 1) * sizeof *s->unit_face);
+    s->unit_lo = malloc((nu ? nu : 1) * sizeof *s->unit_lo);
+    s->unit_hi = malloc((nu ? nu : 1) * sizeof *s->unit_hi);
+    if (!s->face_unit || !s->unit_face || !s->unit_lo || !s->unit_hi) {
+        free(count);
+        free(unit);
+        *failed = 1;
+        rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for occluder lists");
+        return 0;
+    }
+    /* Units in face order: a mesh's at its first face. */
+    for (uint32_t k = 0; k < nsurf; k++)
+        unit[k] = RP_NONE;
+    s->nunits = 0;
+    for (size_t f = 0; f < n; f++) {
+        uint32_t k = s->faces[f].surface, u;
+        if (count[k] <= HIER_CULL_GROUP_FACES || unit[k] == RP_NONE) {
+            u = (uint32_t)s->nunits++;
+            s->unit_face[u] = count[k] <= HIER_CULL_GROUP_FACES ? (uint32_t)f : RP_NONE;
+            s->unit_lo[u] = s->faces[f].lo;
+            s->unit_hi[u] = s->faces[f].hi;
+            if (count[k] > HIER_CULL_GROUP_FACES)
+                unit[k] = u;
+        } else {
+            u = unit[k];
+            s->unit_lo[u] = vmin(s->unit_lo[u], s->faces[f].lo);
+            s->unit_hi[u] = vmax(s->unit_hi[u], s->faces[f].hi);
+        }
+        s->face_unit[f] = u;
+    }
+    free(count);
+    free(unit);
+    return 1;
+}
+
+rp_status hier_cull_init(hier_state *s, rp_error *err)
+{
+    int failed = 0;
+    s->cull = cull_units(s, err, &failed);
+    if (failed)
+        return RP_ERR_NOMEM;
     if (!s->cull)
         return RP_OK; /* every link casts its rays */
+    const size_t n = s->nunits;
     s->pair_off = calloc(n * n, sizeof *s->pair_off);
     s->pair_cnt = calloc(n * n, sizeof *s->pair_cnt);
     size_t cap = 1024;
     s->cand = malloc(cap * sizeof *s->cand);
     if (!s->pair_off || !s->pair_cnt || !s->cand)
         return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for occluder lists");
-    /* front[k n + f]: face k has a corner strictly in front of f's plane;
-     * behind[k n + f]: strictly behind it. */
-    unsigned char *front = malloc(n * n), *behind = malloc(n * n);
+    /* Between one-face units: front[k n + f]: unit k has a corner strictly
+     * in front of face f's plane; behind[k n + f]: strictly behind it. */
+    unsigned char *front = calloc(n * n, 1), *behind = calloc(n * n, 1);
     if (!front || !behind) {
         free(front);
         free(behind);
@@ -103,19 +187,36 @@ rp_status hier_cull_init(hier_state *s, rp_error *err)
     }
     for (size_t k = 0; k < n; k++)
         for (size_t f = 0; f < n; f++) {
-            front[k * n + f] = (unsigned char)face_side(s, &s->nodes[k], (uint32_t)f, 1);
-            behind[k * n + f] = (unsigned char)face_side(s, &s->nodes[k], (uint32_t)f, -1);
+            uint32_t fk = s->unit_face[k], ff = s->unit_face[f];
+            if (ff == RP_NONE)
+                continue;
+            if (fk != RP_NONE) {
+                front[k * n + f] = (unsigned char)face_side(s, &s->nodes[fk], ff, 1);
+                behind[k * n + f] = (unsigned char)face_side(s, &s->nodes[fk], ff, -1);
+            } else
+                front[k * n + f] = (unsigned char)box_in_front(s, s->unit_lo[k], s->unit_hi[k], ff,
+                                                               hier_box_tol(s->unit_lo[k], s->unit_hi[k]));
         }
     s->ncand = 0;
     for (size_t i = 0; i < n; i++)
         for (size_t j = i + 1; j < n; j++) {
-            rp_vec3 lo = vmin(s->faces[i].lo, s->faces[j].lo), hi = vmax(s->faces[i].hi, s->faces[j].hi);
+            uint32_t fi = s->unit_face[i], fj = s->unit_face[j];
+            if (fi == RP_NONE || fj == RP_NONE)
+                continue; /* a link with an end on a mesh casts its rays */
+            rp_vec3 lo = vmin(s->faces[fi].lo, s->faces[fj].lo), hi = vmax(s->faces[fi].hi, s->faces[fj].hi);
             size_t off = s->ncand;
             for (size_t k = 0; k < n; k++) {
-                if (k == i || k == j || !front[k * n + i] || !front[k * n + j] ||
-                    !box_overlap(s->faces[k].lo, s->faces[k].hi, lo, hi,
-                                 s->faces[k].tol + s->faces[i].tol + s->faces[j].tol) ||
-                    !(front[i * n + k] || front[j * n + k]) || !(behind[i * n + k] || behind[j * n + k]))
+                uint32_t fk = s->unit_face[k];
+                if (k == i || k == j || !front[k * n + i] || !front[k * n + j])
+                    continue;
+                if (fk == RP_NONE) {
+                    /* A mesh: its box meets the pair's, in front of both. */
+                    if (!box_overlap(s->unit_lo[k], s->unit_hi[k], lo, hi,
+                                     hier_box_tol(s->unit_lo[k], s->unit_hi[k]) + s->faces[fi].tol + s->faces[fj].tol))
+                        continue;
+                } else if (!box_overlap(s->faces[fk].lo, s->faces[fk].hi, lo, hi,
+                                        s->faces[fk].tol + s->faces[fi].tol + s->faces[fj].tol) ||
+                           !(front[i * n + k] || front[j * n + k]) || !(behind[i * n + k] || behind[j * n + k]))
                     continue;
                 if (s->ncand == cap) {
                     cap *= 2;
@@ -137,12 +238,15 @@ rp_status hier_cull_init(hier_state *s, rp_error *err)
     return RP_OK;
 }
 
-/* 1 if some listed face may block a segment between nodes q and p. */
+/* 1 if some listed unit may block a segment between nodes q and p. */
 static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_node *p)
 {
     if (!s->cull)
         return 1;
-    size_t at = (size_t)q->face * s->nfaces + p->face;
+    uint32_t uq = s->face_unit[q->face], up = s->face_unit[p->face];
+    if (s->unit_face[uq] == RP_NONE || s->unit_face[up] == RP_NONE)
+        return 1;
+    size_t at = (size_t)uq * s->nunits + up;
     uint32_t cnt = s->pair_cnt[at];
     if (cnt == 0)
         return 0;
@@ -158,12 +262,20 @@ static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_nod
     const uint32_t *c = s->cand + s->pair_off[at];
     const double tol = s->faces[q->face].tol + s->faces[p->face].tol;
     for (uint32_t k = 0; k < cnt; k++) {
-        if (!box_overlap(s->faces[c[k]].lo, s->faces[c[k]].hi, lo, hi, tol + s->faces[c[k]].tol))
+        uint32_t fk = s->unit_face[c[k]];
+        if (fk == RP_NONE) {
+            /* A mesh blocks when its box meets the two elements' box. */
+            if (box_overlap(s->unit_lo[c[k]], s->unit_hi[c[k]], lo, hi,
+                            tol + hier_box_tol(s->unit_lo[c[k]], s->unit_hi[c[k]])))
+                return 1;
+            continue;
+        }
+        if (!box_overlap(s->faces[fk].lo, s->faces[fk].hi, lo, hi, tol + s->faces[fk].tol))
             continue;
         /* Both elements on one side of the candidate's plane: the segments
          * between them cannot cross it. */
-        if (!(face_side(s, q, c[k], 1) || face_side(s, p, c[k], 1)) ||
-            !(face_side(s, q, c[k], -1) || face_side(s, p, c[k], -1)))
+        if (!(face_side(s, q, fk, 1) || face_side(s, p, fk, 1)) ||
+            !(face_side(s, q, fk, -1) || face_side(s, p, fk, -1)))
             continue;
         return 1;
     }

@@ -436,6 +436,7 @@ size_t hier_bytes(const hier_state *s)
              s->nfaces * (3 * sizeof(uint32_t) + sizeof(double)) + s->cl_nn * (sizeof(double) + 1) +
              s->cap_clinks * sizeof(hier_clink) + s->cap_cl_cent * sizeof(hier_centry) + s->cap_cl_nent * sizeof(hier_nentry) + s->cap_cl_cvia * sizeof(uint32_t);
     if (s->cull)
-        b += s->nfaces * s->nfaces * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t);
+        b += s->nunits * s->nunits * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t) +
+             s->nfaces * sizeof(uint32_t) + s->nunits * (sizeof(uint32_t) + 2 * sizeof(rp_vec3));
     return b;
 }

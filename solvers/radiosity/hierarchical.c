@@ -273,6 +273,10 @@ static void hier_fini(void *state)
     free(s->pair_off);
     free(s->pair_cnt);
     free(s->cand);
+    free(s->face_unit);
+    free(s->unit_face);
+    free(s->unit_lo);
+    free(s->unit_hi);
     hier_importance_free(s);
     hier_cluster_free(s);
     hier_linear_free(s);
