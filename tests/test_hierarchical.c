@@ -1761,6 +1761,57 @@ static void sealed_check(const rp_scene *scene, const char *const *modes, const 
     free(h);
 }
 
+/* Shaft culling with a mesh as one occluder unit (hier_link.c
+ * cull_units): a 0.8 x 0.8 lamp 1 above a floor of the same size, and
+ * between them a black slab (a box mesh 2 x 0.1 x 2 of 1,200 triangles,
+ * one unit) that hides the lamp from every point of the floor.  The
+ * lamp-floor links are between two one-face units, so culling judges
+ * them: the floor must stay exactly black, with the mesh solved whole
+ * (one unit) and simplified (a few faces, each its own unit), and be lit
+ * without the slab (so the check can fail). */
+Test(hier, mesh_occluder_unit_blocks_links_between_faces, .init = hsetup, .timeout = 300)
+{
+    char dir[] = "/tmp/rp-cull-XXXXXX";
+    cr_assert_not_null(mkdtemp(dir));
+    char path[64];
+    snprintf(path, sizeof path, "%s/slab.off", dir);
+    static const double lo[3] = {-1, 0.45, -1}, hi[3] = {1, 0.55, 1};
+    cr_assert_eq(off_box(path, lo, hi, 10, 0), 600);
+    static const char head[] = "bands grey\n"
+                               "material lamp reflect 0 emit 1\n"
+                               "material white reflect 0.5\n"
+                               "material black reflect 0\n"
+                               "quad lamp lamp  -0.4 1 -0.4  0.4 1 -0.4  0.4 1 0.4  -0.4 1 0.4\n"
+                               "quad floor white  -0.4 0 -0.4  -0.4 0 0.4  0.4 0 0.4  0.4 0 -0.4\n";
+    for (int k = 0; k < 3; k++) {
+        char text[512];
+        snprintf(text, sizeof text, "%s%s", head, k < 2 ? "mesh slab black slab.off\n" : "");
+        rp_scene *scene = rp_test_parse_in(text, dir);
+        const char *kv[] = {"simplify", k == 0 ? "off" : "auto", NULL};
+        hrun r;
+        solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+        const hier_state *hs = r.state;
+        cr_assert(hs->cull, "culling is on");
+        if (k == 0)
+            cr_assert(hs->nunits == 3 && hs->nfaces == 1202, "%zu units for %zu faces", hs->nunits, hs->nfaces);
+        double h[3] = {0}; /* one band, at most three surfaces */
+        rp_error err = {""};
+        rp_estimate e = {.surface_radiance = h};
+        cr_assert_eq(r.type->estimate(r.state, &e, &err), RP_OK, "%s", err.message);
+        double floor = h[surface_index(scene, "floor")];
+        cr_log_info("slab %s: %zu faces, %zu units, floor %.6g", k == 2 ? "absent" : kv[1], hs->nfaces, hs->nunits,
+                    floor);
+        if (k < 2)
+            cr_expect_eq(floor, 0.0, "simplify %s: floor %.6g behind the slab", kv[1], floor);
+        else
+            cr_expect_gt(floor, 0.01, "no slab: floor %.6g", floor);
+        hrun_end(&r);
+        rp_scene_destroy(scene);
+    }
+    remove(path);
+    rmdir(dir);
+}
+
 /* A closed box in a lit room whose inside is a separate surface: an
  * outward box with an inward box 1 cm inside it.  As two `box` statements
  * (19 faces in the scene, clustering only when asked), and as meshes with
