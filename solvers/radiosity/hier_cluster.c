@@ -86,7 +86,6 @@
 
 #define CL_SEED UINT64_C(0x6c75737465723031)
 #define CE_SEED UINT64_C(0x636c656e74727931)
-#define CR_SEED UINT64_C(0x636c726f756e6431)
 
 /* ---- items ---- */
 
@@ -608,14 +607,13 @@ static unsigned face_samples(const hier_state *s, const hier_cluster *c, uint32_
     return s->cluster_face_rays + (unsigned)hier_min(extra, (double)FACE_MAX_SAMPLES);
 }
 
-/* The entries of face f of cluster receiver c for links[0..nl) of its
- * links, drawn with probabilities pdf under the mixture over ALL its
- * links (link_pdf) and cdf, cumulative over these nl and normalised to 1.
+/* The entries of face f of cluster receiver c, whose links are
+ * links[0..nl) with sampling probabilities pdf (and cdf, cumulative).
  *
- * What face f gathers through its links is sum_L F_fL B_L, F_fL its own
- * form factor to the source of L, with its own orientation and
- * visibility.  K samples estimate it: a link L drawn with probability
- * P(L) (stratified over the cdf), a point x on f (stratified), a point y
+ * What face f gathers through them is sum_L F_fL B_L, F_fL its own form
+ * factor to the source of L, with its own orientation and visibility.
+ * K samples estimate it: a link L drawn with probability P(L)
+ * (stratified over the cdf), a point x on f (stratified), a point y
  * uniform on L's source, and one ray; an open pair with a positive kernel
  * gives the entry (f, leaf under y, A_S k / (pi K P(L))).  This is
  * unbiased for any P > 0, and exact where it matters most: a face turned
@@ -624,37 +622,28 @@ static unsigned face_samples(const hier_state *s, const hier_cluster *c, uint32_
  * the parts of a source its rays reach.  The isotropic push it replaces
  * handed every face below the cluster a share of the cluster's energy
  * whatever its visibility (Sillion 1995, sec. 3.2; Smits, Arvo & Greenberg
- * 1994 compute each member's own transfer, which this samples).
- *
- * Links a cluster gains are drawn for alone, the entries of the links it
- * keeps staying as they are: of the K samples a draw over all its links
- * would take, a subset G of them with mixture mass P(G) gets K P(G) on
- * average (n, randomly rounded by the caller), each drawn from P(L) /
- * P(G) over G and weighted as above, 1 / (K P(L)).  So each link's
- * entries stay an unbiased estimate of its own transfer, as when the
- * cluster drew for all of them again (which cost the bunny scene 12M of
- * its 29M rays).  Key gen tells the draws of one (cluster, face) apart. */
+ * 1994 compute each member's own transfer, which this samples). */
 static unsigned face_entries(const hier_state *s, uint32_t c, uint32_t f, const hier_clink *links, const double *pdf,
-                             const double *cdf, unsigned nl, unsigned n, double K, uint64_t gen, cl_draw *out,
-                             double *rays)
+                             const double *cdf, unsigned nl, cl_draw *out, double *rays)
 {
+    const unsigned K = face_samples(s, &s->cl[c], f, nl);
     const hier_node *nd = &s->nodes[f];
     rp_vec3 nf = s->faces[f].n;
-    uint64_t key = hier_key((s->seed ^ CE_SEED) + gen * UINT64_C(0x9e3779b97f4a7c15), c, f);
+    uint64_t key = hier_key(s->seed ^ CE_SEED, c, f);
     /* The points on the face follow a golden-ratio sequence in their
-     * first coordinate (well spread for any n, and not in step with the
+     * first coordinate (well spread for any K, and not in step with the
      * strata of the link choice). */
-    const double x0 = hier_u01(key, 8 * (uint64_t)n);
-    unsigned m = 0;
-    for (unsigned j = 0; j < n; j++) {
-        double u = (j + hier_u01(key, 8 * (uint64_t)j)) / n;
+    const double x0 = hier_u01(key, 8 * (uint64_t)K);
+    unsigned n = 0;
+    for (unsigned j = 0; j < K; j++) {
+        double u = (j + hier_u01(key, 8 * (uint64_t)j)) / K;
         unsigned lo = 0, hi = nl - 1; /* first link with cdf > u */
         while (lo < hi) {
-            unsigned mid = (lo + hi) / 2;
-            if (cdf[mid] > u)
-                hi = mid;
+            unsigned m = (lo + hi) / 2;
+            if (cdf[m] > u)
+                hi = m;
             else
-                lo = mid + 1;
+                lo = m + 1;
         }
         if (!(pdf[lo] > 0))
             continue;
@@ -670,9 +659,9 @@ static unsigned face_entries(const hier_state *s, uint32_t c, uint32_t f, const 
         *rays += 1;
         if (rp_ray_occluded(s->rc, x, nf, y, ny))
             continue;
-        entry_add(out, &m, f, leaf_at(s, fb, y), src, item_area(s, src) * w / (RP_PI * K * pdf[lo]));
+        entry_add(out, &n, f, leaf_at(s, fb, y), src, item_area(s, src) * w / (RP_PI * K * pdf[lo]));
     }
-    return m;
+    return n;
 }
 
 /* Sampling probabilities of cluster c's links (links[0..nl)): a mixture
@@ -943,10 +932,6 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     double *pdf = NULL, *cdf = NULL;
     uint32_t *order = NULL;
     size_t capbyc = 0, cappdf = 0, capcdf = 0;
-    unsigned *gcount = NULL, *tdraw = NULL;
-    double *gmass = NULL;
-    size_t captdraw = 0;
-    const uint64_t gen = s->refine_passes; /* tells one draw of a (cluster, face) from another */
     double rays = 0;
     /* New links received by clusters: their unoccluded estimates. */
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) if (nl > 1024)
@@ -990,15 +975,15 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
         }
         k0 = k1;
     }
-    /* The links received by clusters still marked HIER_CL_NONE are new:
-     * their clusters draw for them below. */
     for (size_t k = 0; k < nl; k++)
-        if (links[k].count == HIER_CL_NONE)
+        if (links[k].count == HIER_CL_NONE) { /* received by a cluster */
             dirty[links[k].recv & ~HIER_CL_BIT] |= 2;
-    /* Clusters that lost links lose those links' entries. */
+            links[k].count = 0;
+        }
+    /* Clusters that only lost links lose their entries. */
     size_t ngain = 0;
     for (size_t c = 0; c < s->ncl; c++) {
-        if (dirty[c] & 1)
+        if (dirty[c] == 1)
             prune_entries(s, c, rm, nrm);
         ngain += (dirty[c] & 2) != 0;
     }
@@ -1010,9 +995,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
      * scene's peak). */
     lstart = calloc(s->ncl + 1, sizeof *lstart);
     fill = malloc((s->ncl ? s->ncl : 1) * sizeof *fill);
-    gcount = malloc((s->ncl ? s->ncl : 1) * sizeof *gcount);
-    gmass = malloc((s->ncl ? s->ncl : 1) * sizeof *gmass);
-    if (!lstart || !fill || !gcount || !gmass)
+    if (!lstart || !fill)
         goto nomem;
     size_t ncl_links = 0;
     for (size_t k = 0; k < nl; k++)
@@ -1040,51 +1023,28 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
             unsigned n = lstart[c + 1] - lstart[c];
             if (!(dirty[c] & 2))
                 continue;
+            s->ncl_cdead += kill_entries(s->cl_cent + s->cl_efirst[c], sizeof(hier_centry), offsetof(hier_centry, F),
+                                          s->cl_ecount[c]);
+            if (n == 0)
+                continue;
             if (!hier_grow((void **)&byc, &capbyc, a + n, sizeof *byc) ||
                 !hier_grow((void **)&pdf, &cappdf, a + n, sizeof *pdf) ||
                 !hier_grow((void **)&cdf, &capcdf, a + n, sizeof *cdf))
                 goto nomem;
-            /* The mixture over all the cluster's links, then the new
-             * links alone (G) with their probabilities under it and
-             * their cdf normalised over G (face_entries). */
             fill[c] = (uint32_t)a;
             for (unsigned i = 0; i < n; i++)
                 byc[a + i] = links[order[lstart[c] + i]];
             link_pdf(s, byc + a, n, pdf + a, cdf + a);
-            unsigned ng = 0;
-            double PG = 0;
-            for (unsigned i = 0; i < n; i++)
-                if (byc[a + i].count == HIER_CL_NONE) {
-                    byc[a + ng] = byc[a + i];
-                    pdf[a + ng] = pdf[a + i];
-                    PG += pdf[a + i];
-                    cdf[a + ng] = PG;
-                    ng++;
-                }
-            for (unsigned i = 0; i < ng; i++)
-                cdf[a + i] /= PG;
-            cdf[a + ng - 1] = 1.0 + 1e-12; /* every u in [0, 1) finds a link */
-            gcount[c] = ng;
-            gmass[c] = ng == n ? 1.0 : PG;
-            a += ng;
+            a += n;
             const hier_cluster *k = &s->cl[c];
             if (!hier_grow((void **)&tasks, &captask, 2 * (ntask + k->count), sizeof *tasks) ||
-                !hier_grow((void **)&toff, &captoff, ntask + k->count + 1, sizeof *toff) ||
-                !hier_grow((void **)&tdraw, &captdraw, ntask + k->count + 1, sizeof *tdraw))
+                !hier_grow((void **)&toff, &captoff, ntask + k->count + 1, sizeof *toff))
                 goto nomem;
             for (uint32_t i = k->first; i < k->first + k->count; i++) {
-                uint32_t f = s->cl_faces[i];
-                unsigned K = face_samples(s, k, f, n);
-                /* K x P(G) samples on average, randomly rounded. */
-                double want = K * gmass[c];
-                unsigned draw = (unsigned)want;
-                if (hier_u01(hier_key((s->seed ^ CR_SEED) + gen, c, f), 0) < want - draw)
-                    draw++;
                 tasks[2 * ntask] = (uint32_t)c;
-                tasks[2 * ntask + 1] = f;
+                tasks[2 * ntask + 1] = s->cl_faces[i];
                 toff[ntask] = slots;
-                tdraw[ntask] = draw;
-                slots += draw;
+                slots += face_samples(s, k, s->cl_faces[i], n);
                 ntask++;
             }
         }
@@ -1095,32 +1055,14 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
         for (long t = 0; t < (long)ntask; t++) {
             uint32_t c = tasks[2 * t], f = tasks[2 * t + 1];
             uint32_t a = fill[c], n = lstart[c + 1] - lstart[c];
-            cnt[t] = tdraw[t] ? face_entries(s, c, f, byc + a, pdf + a, cdf + a, gcount[c], tdraw[t],
-                                             face_samples(s, &s->cl[c], f, n), gen, tmp + toff[t], &rays)
-                              : 0;
+            cnt[t] = face_entries(s, c, f, byc + a, pdf + a, cdf + a, n, tmp + toff[t], &rays);
         }
         s->form_factors += (double)ntask;
         size_t t = 0;
         for (size_t c = c0; c < c1; c++) {
             if (!(dirty[c] & 2))
                 continue;
-            /* The entries of the links the cluster keeps move to the end
-             * of the pool, before the new ones, so its range stays one. */
-            uint32_t of = s->cl_efirst[c], on = s->cl_ecount[c];
             s->cl_efirst[c] = (uint32_t)s->ncl_cent;
-            if (on) {
-                if (s->ncl_cent + on > UINT32_MAX ||
-                    !hier_grow((void **)&s->cl_cent, &s->cap_cl_cent, s->ncl_cent + on + 1, sizeof *s->cl_cent) ||
-                    !hier_grow((void **)&s->cl_cvia, &s->cap_cl_cvia, s->ncl_cent + on + 1, sizeof *s->cl_cvia))
-                    goto nomem;
-                for (uint32_t j = 0; j < on; j++)
-                    if (s->cl_cent[of + j].F != 0) {
-                        s->cl_cent[s->ncl_cent] = s->cl_cent[of + j];
-                        s->cl_cvia[s->ncl_cent++] = s->cl_cvia[of + j];
-                        s->cl_cent[of + j].F = 0;
-                        s->ncl_cdead++;
-                    }
-            }
             for (; t < ntask && tasks[2 * t] == c; t++)
                 if (!pool_append(&s->cl_cent, &s->ncl_cent, &s->cap_cl_cent, &s->cl_cvia, &s->cap_cl_cvia,
                                  tmp + toff[t], cnt[t]))
@@ -1151,12 +1093,6 @@ done:
     free(pdf);
     free(cdf);
     free(order);
-    free(gcount);
-    free(gmass);
-    free(tdraw);
-    for (size_t k = 0; k < nl; k++)
-        if (links[k].count == HIER_CL_NONE)
-            links[k].count = 0;
     return st;
 }
 
