@@ -24,8 +24,9 @@
  * initial linking is O(n^2)). */
 #define HIER_DEFAULT_MAX_FACES 4096
 /* Root-pair occluder lists (shaft culling) up to this many occluder
- * units: a face, or every face of a surface of more than
- * HIER_CULL_GROUP_FACES faces (a mesh) as one box. */
+ * units.  Up to this many faces a unit is a face; above, the faces of a
+ * surface of more than HIER_CULL_GROUP_FACES faces (a mesh) are one unit,
+ * their box (hier_link.c cull_units). */
 #define HIER_CULL_MAX_FACES 512
 #define HIER_CULL_GROUP_FACES 64
 /* A point far from a source (r^2 > ratio x source area) uses the disk
