@@ -100,48 +100,33 @@ static int box_in_front(const hier_state *s, rp_vec3 lo, rp_vec3 hi, uint32_t f,
  * may block it (before, culling was off above 512 faces: the bunny scene
  * cast 29.2M rays, now 20.4M with the same answers).  Grouping a mesh of
  * fewer faces would only coarsen its faces' own plane tests (CGAL's blade,
- * 246 faces in the room: 57M rays instead of 68M as faces).  Returns 0
- * when culling is off (more units than HIER_CULL_MAX_FACES). */
-static int cull_units(hier_state *s, rp_error *err, int *failed)
+ * 246 faces in the room: 57M rays instead of 68M as faces).  s->cull is
+ * 0 when there are more units than HIER_CULL_MAX_FACES. */
+static rp_status cull_units(hier_state *s, rp_error *err)
 {
     const size_t n = s->nfaces;
     uint32_t nsurf = 0;
     for (size_t f = 0; f < n; f++)
         nsurf = s->faces[f].surface + 1 > nsurf ? s->faces[f].surface + 1 : nsurf;
     uint32_t *count = calloc(nsurf ? nsurf : 1, sizeof *count), *unit = malloc((nsurf ? nsurf : 1) * sizeof *unit);
-    if (!count || !unit) {
-        free(count);
-        free(unit);
-        *failed = 1;
-        rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for occluder lists");
-        return 0;
-    }
-    size_t nu = 0;
+    rp_status st = RP_OK;
+    if (!count || !unit)
+        goto nomem;
     for (size_t f = 0; f < n; f++)
         count[s->faces[f].surface]++;
     const uint32_t group = n <= HIER_CULL_MAX_FACES ? UINT32_MAX : HIER_CULL_GROUP_FACES;
+    size_t nu = 0;
     for (uint32_t k = 0; k < nsurf; k++)
-        if (count[k] > group)
-            nu++;
-    for (uint32_t k = 0; k < nsurf; k++)
-        if (count[k] <= group)
-            nu += count[k];
-    if (nu > HIER_CULL_MAX_FACES) {
-        free(count);
-        free(unit);
-        return 0;
-    }
+        nu += count[k] > group ? 1 : count[k];
+    s->cull = nu <= HIER_CULL_MAX_FACES;
+    if (!s->cull)
+        goto done;
     s->face_unit = malloc((n ? n : 1) * sizeof *s->face_unit);
     s->unit_face = malloc((nu ? nu : 1) * sizeof *s->unit_face);
     s->unit_lo = malloc((nu ? nu : 1) * sizeof *s->unit_lo);
     s->unit_hi = malloc((nu ? nu : 1) * sizeof *s->unit_hi);
-    if (!s->face_unit || !s->unit_face || !s->unit_lo || !s->unit_hi) {
-        free(count);
-        free(unit);
-        *failed = 1;
-        rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for occluder lists");
-        return 0;
-    }
+    if (!s->face_unit || !s->unit_face || !s->unit_lo || !s->unit_hi)
+        goto nomem;
     /* Units in face order: a mesh's at its first face. */
     for (uint32_t k = 0; k < nsurf; k++)
         unit[k] = RP_NONE;
@@ -162,19 +147,20 @@ static int cull_units(hier_state *s, rp_error *err, int *failed)
         }
         s->face_unit[f] = u;
     }
+    goto done;
+nomem:
+    st = rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory for occluder lists");
+done:
     free(count);
     free(unit);
-    return 1;
+    return st;
 }
 
 rp_status hier_cull_init(hier_state *s, rp_error *err)
 {
-    int failed = 0;
-    s->cull = cull_units(s, err, &failed);
-    if (failed)
-        return RP_ERR_NOMEM;
-    if (!s->cull)
-        return RP_OK; /* every link casts its rays */
+    rp_status st = cull_units(s, err);
+    if (st != RP_OK || !s->cull)
+        return st; /* without culling every link casts its rays */
     const size_t n = s->nunits;
     s->pair_off = calloc(n * n, sizeof *s->pair_off);
     s->pair_cnt = calloc(n * n, sizeof *s->pair_cnt);
