@@ -22,10 +22,15 @@
  * so its value is that of its open part (what the camera and other
  * elements see); the pull weighs a leaf by its open area, and a
  * surface's average counts the enclosed part as emission only
- * (hier_surfaces).  In an enclosure the row sums already do this (the
- * leaf's form factors sum to f, update_scale), and the linear basis keeps
- * the whole element's function, so neither uses it; nor does the
- * importance sweep, which only weighs the refinement.  Gouraud vertex
+ * (hier_surfaces).  With --basis linear the gathered linear coefficients
+ * are divided too: a link's coupling takes its visibility as uniform over
+ * the pair (hier_linear.c), so what a half-enclosed leaf gathers is f
+ * times the function its open part would have, and the leaf keeps that
+ * function.  (Not divided, it kept the whole leaf's, half the light on its
+ * open half, and the Cornell box's sides came out 1.2 to 1.9% dark.)  In
+ * an enclosure the row sums already do this (the leaf's form factors sum
+ * to f, update_scale), so it is not used there; nor does the importance
+ * sweep, which only weighs the refinement.  Gouraud vertex
  * values replace each link's gathered F / f by the point form factor at
  * the vertex (hier_image.c node_changes).
  *

@@ -123,10 +123,10 @@ static const rp_option_spec hier_options[] = {
      "clusters.  Default none: on the scenes measured it saved no time (docs/design.md)",
      "none"},
     {"open-fraction", "on|off",
-     "a constant element's value is that of its part not enclosed by other geometry (the floor "
-     "under a box standing on it), measured by rays from a grid of points on it, rather than the "
-     "mean over the whole element; open scenes with the constant basis only (in an enclosure the "
-     "row sums do this)",
+     "an element's value (with --basis linear, its function) is that of its part not enclosed by "
+     "other geometry (the floor under a box standing on it), measured by rays from a grid of points "
+     "on it, rather than the mean over the whole element; open scenes only (in an enclosure the row "
+     "sums do this)",
      "on"},
     {"basis", "constant|linear",
      "the functions radiosity is expanded in on each element: its area mean, or a linear function "
@@ -419,7 +419,7 @@ static rp_status update_scale(hier_state *s, rp_error *err)
         s->cap_scale = s->cap_nodes;
     }
     double *sum = s->ff_scale;
-    if (s->linear) {
+    if (s->linear && s->enclosure) {
         /* --basis linear: the row sum is a linear function S0 + S1 . phi
          * over each leaf (the ancestors' links' slopes pushed down), and
          * the leaf's gathered G0 + G1 . phi is divided by it to first
@@ -650,7 +650,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
     if (s->clustering && (st = hier_cluster_init(s, err)) != RP_OK)
         return st;
     s->enclosure = scene_is_enclosure(s);
-    s->open_on = open_fraction && !s->enclosure && !s->linear;
+    s->open_on = open_fraction && !s->enclosure;
     if (s->importance != HIER_IMP_NONE) {
         if ((st = hier_importance_init(s, err)) != RP_OK)
             return st;
@@ -802,9 +802,13 @@ static double hier_sweep(hier_state *s)
          * part gathers (hier_open.c). */
         for (size_t i = 0; i < nn; i++) {
             const double f = hier_open_divisor(s, (uint32_t)i);
-            if (f != 1.0)
+            if (f != 1.0) {
                 for (size_t b = 0; b < nb; b++)
                     Bg[i * nb + b] /= f;
+                if (s->linear)
+                    for (size_t b = 0; b < 2 * nb; b++)
+                        s->Bg1[i * nb * 2 + b] /= f;
+            }
         }
     /* Push (sec. 4.2): parents come before their children in node order.
      * W temporarily marks nodes that some link reaches (theirs or an
