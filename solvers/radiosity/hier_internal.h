@@ -238,13 +238,14 @@ typedef struct hier_state {
     hier_node *nodes;
     size_t nnodes, cap_nodes;
     double *B;           /* nnodes x nb: radiosity (area mean over the node) */
-    double *Bg;          /* nnodes x nb: rho x radiosity gathered by the node's links */
+    double *Bg;          /* nnodes x nb: rho x radiosity gathered by the node's links;
+                            the push then adds what its ancestors gathered
+                            (hier_sweep), so no array for that part */
     /* --open-fraction (hier_open.c): per node, the fraction of its area
      * not enclosed by other geometry; open_n nodes measured so far. */
     int open_on;
     double *open;
     size_t open_n, cap_open;
-    double *Bd;          /* nnodes x nb: gathered radiosity pushed down from ancestors */
     double *W;           /* nnodes: weight in the pull, the open area
                             (hier_open.c) of the leaves below that some
                             link reaches (see hier_sweep) */
@@ -318,7 +319,7 @@ typedef struct hier_state {
     double cl_area_rel, cl_area; /* power-error area scale (relative, absolute) */
 
     /* --basis linear (hier_linear.c); all NULL / 0 with the constant basis.
-     * B, Bg and Bd above keep the constant coefficients (the area means),
+     * B and Bg above keep the constant coefficients (the area means),
      * so surface averages, clusters, importance and the oracle read them
      * unchanged; the linear ones are kept beside them. */
     int linear;
@@ -487,8 +488,9 @@ void hier_linear_relation(const hier_state *s, uint32_t p, uint32_t c, double a[
 /* Receiver q's gathered sums over its links, before rho: acc[b] for the
  * constant, acc1[2 b + k] for phi_k. */
 void hier_linear_gather(const hier_state *s, uint32_t q, double *acc, double *acc1);
-/* Push: node i's children's Bd and Bd1 from i's Bd1 + Bg1 (their Bd must
- * already hold i's Bd + Bg). */
+/* Push: node i's children's Bd1 from i's Bd1 + Bg1, and their Bg gains
+ * i's Bg (by then what i and its ancestors gathered) plus i's linear
+ * function's mean over each child. */
 void hier_linear_push(hier_state *s, uint32_t i);
 /* Pull: node i's B1 from its children's, weighted as its B was (w, the
  * weights of hierarchical.c's pull_children); i's B must be set. */

@@ -346,7 +346,8 @@ void hier_linear_push(hier_state *s, uint32_t i)
         for (size_t b = 0; b < nb; b++) {
             const size_t at = ((size_t)i * nb + b) * 2, ct = ((size_t)c * nb + b) * 2;
             const double L[2] = {s->Bd1[at] + s->Bg1[at], s->Bd1[at + 1] + s->Bg1[at + 1]};
-            s->Bd[(size_t)c * nb + b] += hier_linear_restrict(a, A, L, s->Bd1 + ct);
+            const double down = s->Bg[(size_t)i * nb + b] + hier_linear_restrict(a, A, L, s->Bd1 + ct);
+            s->Bg[(size_t)c * nb + b] += down;
         }
     }
 }

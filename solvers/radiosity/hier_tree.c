@@ -52,8 +52,8 @@ static int resize_nodes(hier_state *s, size_t cap)
     ok &= nd != NULL;
     if (nd)
         s->nodes = nd;
-    double **arrs[4] = {&s->B, &s->Bg, &s->Bd, s->Y ? &s->Y : NULL};
-    for (int k = 0; k < 4; k++) {
+    double **arrs[3] = {&s->B, &s->Bg, s->Y ? &s->Y : NULL};
+    for (int k = 0; k < 3; k++) {
         if (!arrs[k])
             continue;
         double *a = realloc(*arrs[k], cap * s->nb * sizeof *a);
@@ -131,7 +131,6 @@ rp_status hier_nodes_init(hier_state *s, rp_error *err)
             /* B starts at E = pi Le (Cohen & Wallace 1993, eq. 2.4). */
             s->B[f * s->nb + b] = RP_PI * Le[b];
             s->Bg[f * s->nb + b] = 0;
-            s->Bd[f * s->nb + b] = 0;
         }
         if (s->linear) {
             hier_basis_of(nd, s->faces[f].n, &s->basis[f]);
@@ -226,7 +225,6 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err)
         for (size_t b = 0; b < nb; b++) {
             s->B[ci * nb + b] = s->B[(size_t)i * nb + b];
             s->Bg[ci * nb + b] = 0;
-            s->Bd[ci * nb + b] = 0;
         }
         if (s->Y)
             for (size_t b = 0; b < nb; b++)
@@ -422,7 +420,7 @@ uint32_t hier_locate(const hier_state *s, uint32_t f, rp_vec3 p, double w[4])
 
 size_t hier_bytes(const hier_state *s)
 {
-    size_t b = s->cap_nodes * (sizeof(hier_node) + ((s->Y ? 4 : 3) * s->nb + 1) * sizeof(double));
+    size_t b = s->cap_nodes * (sizeof(hier_node) + ((s->Y ? 3 : 2) * s->nb + 1) * sizeof(double));
     if (s->Y)
         b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit);
     b += s->cap_links * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);

@@ -264,7 +264,6 @@ static void hier_fini(void *state)
     free(s->nodes);
     free(s->B);
     free(s->Bg);
-    free(s->Bd);
     free(s->W);
     free(s->ff_scale);
     free(s->ff_lin);
@@ -764,7 +763,7 @@ static double pull_children(const hier_state *s, const hier_node *nd, const doub
 static double hier_sweep(hier_state *s)
 {
     const size_t nb = s->nb, nn = s->nnodes;
-    double *B = s->B, *Bg = s->Bg, *Bd = s->Bd;
+    double *B = s->B, *Bg = s->Bg;
     hier_link *links = s->links;
     const uint32_t *start = s->link_start;
     /* Gather (sec. 4.1): Bg_q = rho_q sum_links F B_p, in link order (B_p
@@ -810,16 +809,18 @@ static double hier_sweep(hier_state *s)
                         s->Bg1[i * nb * 2 + b] /= f;
             }
         }
-    /* Push (sec. 4.2): parents come before their children in node order.
-     * W temporarily marks nodes that some link reaches (theirs or an
-     * ancestor's). */
+    /* Push (sec. 4.2): parents come before their children in node order,
+     * so each child's Bg gains its parent's once the parent's holds what
+     * it and its ancestors gathered: a leaf's Bg ends as the sum over its
+     * chain.  (A separate pushed-down array held the ancestors' part
+     * before stop 39; a + b = b + a in floating point, so the sums are the
+     * same bits.)  W temporarily marks nodes that some link reaches
+     * (theirs or an ancestor's). */
     double *W = s->W;
     for (size_t i = 0; i < nn; i++) {
         const hier_node *nd = &s->nodes[i];
         int reached = start[i + 1] > start[i] || (s->cl_nreach && i < s->cl_nn && s->cl_nreach[i]);
         if (nd->parent == RP_NONE) {
-            for (size_t b = 0; b < nb; b++)
-                Bd[i * nb + b] = 0;
             if (s->linear)
                 memset(s->Bd1 + i * nb * 2, 0, nb * 2 * sizeof *s->Bd1);
         } else
@@ -827,11 +828,12 @@ static double hier_sweep(hier_state *s)
         W[i] = reached;
         if (nd->child == RP_NONE)
             continue;
-        for (uint32_t c = nd->child; c < nd->child + 4; c++)
-            for (size_t b = 0; b < nb; b++)
-                Bd[(size_t)c * nb + b] = Bd[i * nb + b] + Bg[i * nb + b];
         if (s->linear)
             hier_linear_push(s, (uint32_t)i);
+        else
+            for (uint32_t c = nd->child; c < nd->child + 4; c++)
+                for (size_t b = 0; b < nb; b++)
+                    Bg[(size_t)c * nb + b] += Bg[i * nb + b];
     }
     /* Pull: leaves get E + everything gathered on the way down; parents
      * the weighted mean of their children.  A leaf no link reaches sees
@@ -851,7 +853,7 @@ static double hier_sweep(hier_state *s)
             const double scale = hier_row_scale(s, i);
             int emits = 0;
             for (size_t b = 0; b < nb; b++) {
-                double v = RP_PI * Le[b] + scale * (Bg[i * nb + b] + Bd[i * nb + b]);
+                double v = RP_PI * Le[b] + scale * Bg[i * nb + b];
                 change[b] += nd->area * fabs(v - Bi[b]);
                 Bi[b] = v;
                 emits |= Le[b] > 0;
@@ -861,7 +863,7 @@ static double hier_sweep(hier_state *s)
                     for (int k = 0; k < 2; k++) {
                         /* (G1 - (G0 / S0) S1) / S0, ff_lin = S1 / S0 (update_scale) */
                         size_t at = (i * nb + b) * 2 + (size_t)k;
-                        double g0 = scale * (Bg[i * nb + b] + Bd[i * nb + b]);
+                        double g0 = scale * Bg[i * nb + b];
                         double slope = s->enclosure ? s->ff_lin[2 * i + (size_t)k] : 0;
                         s->B1[at] = scale * (s->Bg1[at] + s->Bd1[at]) - g0 * slope;
                     }
@@ -883,12 +885,12 @@ static double hier_sweep(hier_state *s)
 /* One Jacobi sweep of the importance equation over the same links,
  * y_q = r_q + sum_p F_qp rho_p y_p (hier_importance.c; Smits, Arvo &
  * Salesin 1992, divided by the areas), with the radiosity sweep's
- * push-pull and row-sum normalisation.  Bg, Bd and W serve as scratch: the
- * radiosity sweep that follows rewrites all three. */
+ * push-pull and row-sum normalisation.  Bg and W serve as scratch: the
+ * radiosity sweep that follows rewrites both. */
 static void importance_sweep(hier_state *s)
 {
     const size_t nb = s->nb, nn = s->nnodes;
-    double *Y = s->Y, *Yg = s->Bg, *Yd = s->Bd, *W = s->W;
+    double *Y = s->Y, *Yg = s->Bg, *W = s->W;
     hier_link *links = s->links;
     const uint32_t *start = s->link_start;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256)
@@ -911,17 +913,14 @@ static void importance_sweep(hier_state *s)
     for (size_t i = 0; i < nn; i++) {
         const hier_node *nd = &s->nodes[i];
         int reached = start[i + 1] > start[i] || (s->cl_nreach && i < s->cl_nn && s->cl_nreach[i]);
-        if (nd->parent == RP_NONE) {
-            for (size_t b = 0; b < nb; b++)
-                Yd[i * nb + b] = 0;
-        } else
+        if (nd->parent != RP_NONE)
             reached |= W[nd->parent] > 0;
         W[i] = reached;
         if (nd->child == RP_NONE)
             continue;
         for (uint32_t c = nd->child; c < nd->child + 4; c++)
             for (size_t b = 0; b < nb; b++)
-                Yd[(size_t)c * nb + b] = Yd[i * nb + b] + Yg[i * nb + b];
+                Yg[(size_t)c * nb + b] += Yg[i * nb + b];
     }
     /* Pull: a leaf no link reaches sees nothing, so no light reaches it
      * either, and it is left out of its parents' means (as in
@@ -932,7 +931,7 @@ static void importance_sweep(hier_state *s)
         if (nd->child == RP_NONE) {
             const double scale = s->enclosure ? s->ff_scale[i] : 1.0;
             for (size_t b = 0; b < nb; b++)
-                Yi[b] = s->Y0[i] + scale * (Yg[i * nb + b] + Yd[i * nb + b]);
+                Yi[b] = s->Y0[i] + scale * Yg[i * nb + b];
             W[i] = W[i] > 0 ? nd->area : 0;
             continue;
         }
@@ -1008,7 +1007,7 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
         return st;
     if (s->importance != HIER_IMP_NONE) {
         /* Importance and radiosity alternate (Smits et al. 1992): one
-         * sweep of each per step, importance first (it uses Bg, Bd and W
+         * sweep of each per step, importance first (it uses Bg and W
          * as scratch). */
         if (s->imp_nn != s->nnodes) {
             if ((st = hier_importance_direct(s, err)) != RP_OK)
