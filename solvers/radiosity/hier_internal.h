@@ -48,10 +48,6 @@ typedef struct hier_node {
     uint32_t child;    /* first of four children, RP_NONE for a leaf */
     uint16_t nverts;   /* 3 or 4 */
     uint16_t depth;    /* 0 for roots */
-    uint64_t id;       /* names the node by its face and place in the tree,
-                          not its index (which shifts when a face is added
-                          anywhere): the key of its random draws, so a black
-                          ground plane added to a scene changes none */
 } hier_node;
 
 enum {
@@ -242,9 +238,11 @@ typedef struct hier_state {
                             the push then adds what its ancestors gathered
                             (hier_sweep), so no array for that part */
     /* --open-fraction (hier_open.c): per node, the fraction of its area
-     * not enclosed by other geometry; open_n nodes measured so far. */
+     * not enclosed by other geometry, held as the count of open points on
+     * hier_open.c's fine grid (a byte, not a double: read it with
+     * hier_open_fraction); open_n nodes measured so far. */
     int open_on;
-    double *open;
+    uint8_t *open;
     size_t open_n, cap_open;
     double *W;           /* nnodes: weight in the pull, the open area
                             (hier_open.c) of the leaves below that some
@@ -679,6 +677,11 @@ static inline uint64_t hier_mix(uint64_t z)
     z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
     return z ^ (z >> 31);
 }
+
+/* A node's name by its face and place in the tree, not its index (which
+ * shifts when a face is added anywhere): the key of its random draws, so
+ * a black ground plane added to a scene changes none (hier_tree.c). */
+uint64_t hier_node_id(const hier_state *s, const hier_node *nd);
 
 static inline uint64_t hier_key(uint64_t seed, uint64_t a, uint64_t b)
 {

@@ -378,7 +378,7 @@ static double value_rays(const hier_state *s, const link_rays *set, const hier_n
                          double *rays)
 {
     unsigned open = 0, valid = 0;
-    return link_rays_cast(s, set, hier_key(s->seed ^ HIER_VALUE_KEY, q->id, p->id), &open, &valid, rays);
+    return link_rays_cast(s, set, hier_key(s->seed ^ HIER_VALUE_KEY, hier_node_id(s, q), hier_node_id(s, p)), &open, &valid, rays);
 }
 
 /* Completes a link qi <- l->src link_eval left pending, whose unoccluded
@@ -512,7 +512,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
              * kept: independent of the decision, it is unbiased whatever
              * the oracle does with the link. */
             unsigned open = 0, valid = 0;
-            link_rays_cast(s, &set, hier_key(s->seed, q->id, p->id), &open, &valid, rays);
+            link_rays_cast(s, &set, hier_key(s->seed, hier_node_id(s, q), hier_node_id(s, p)), &open, &valid, rays);
             if (open < valid)
                 flags |= HIER_LINK_PARTIAL;
             if (open == 0)

@@ -58,6 +58,11 @@
 #define OPEN_COARSE 3
 #define OPEN_FINE 12
 #define OPEN_RING 4
+/* A node's fraction is held as its count of open points on the fine grid
+ * (a coarse grid all open or all enclosed as all or none of them), one
+ * byte; count / OPEN_FINE^2 is the same double as before it was held. */
+#define OPEN_POINTS (OPEN_FINE * OPEN_FINE)
+_Static_assert(OPEN_POINTS <= UINT8_MAX, "an open count fits a byte");
 
 /* The smallest divisor (one of a link's default 16 ray pairs): below it
  * the few rays of a node's links that reach its open part would be
@@ -90,8 +95,8 @@ static int point_enclosed(const hier_state *s, rp_vec3 x, rp_vec3 n, int k, doub
     return 1;
 }
 
-/* Open fraction of node nd on a g x g grid of cell centres. */
-static double grid_open(const hier_state *s, const hier_node *nd, int g, double *rays)
+/* Open points of node nd on a g x g grid of cell centres. */
+static int grid_open(const hier_state *s, const hier_node *nd, int g, double *rays)
 {
     rp_vec3 n = s->faces[nd->face].n;
     int open = 0;
@@ -99,7 +104,7 @@ static double grid_open(const hier_state *s, const hier_node *nd, int g, double 
         rp_vec3 x = hier_node_point(nd, (k % g + 0.5) / g, (k / g + 0.5) / g);
         open += !point_enclosed(s, x, n, k, rays);
     }
-    return (double)open / (g * g);
+    return open;
 }
 
 rp_status hier_open_update(hier_state *s, rp_error *err)
@@ -112,13 +117,15 @@ rp_status hier_open_update(hier_state *s, rp_error *err)
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 64) reduction(+ : rays)
     for (long i = (long)s->open_n; i < (long)s->nnodes; i++) {
         const hier_node *nd = &s->nodes[i];
-        double f = 1; /* a face that does not reflect gathers nothing to divide */
+        int k = OPEN_POINTS; /* a face that does not reflect gathers nothing to divide */
         if (s->faces[nd->face].reflects) {
-            f = grid_open(s, nd, OPEN_COARSE, &rays);
-            if (f > 0 && f < 1)
-                f = grid_open(s, nd, OPEN_FINE, &rays);
+            k = grid_open(s, nd, OPEN_COARSE, &rays);
+            if (k == OPEN_COARSE * OPEN_COARSE)
+                k = OPEN_POINTS;
+            else if (k > 0)
+                k = grid_open(s, nd, OPEN_FINE, &rays);
         }
-        s->open[i] = f;
+        s->open[i] = (uint8_t)k;
     }
     s->rays += rays;
     s->open_n = s->nnodes;
@@ -127,7 +134,7 @@ rp_status hier_open_update(hier_state *s, rp_error *err)
 
 double hier_open_fraction(const hier_state *s, uint32_t i)
 {
-    return s->open_on && i < s->open_n ? s->open[i] : 1.0;
+    return s->open_on && i < s->open_n ? s->open[i] / (double)OPEN_POINTS : 1.0;
 }
 
 double hier_open_divisor(const hier_state *s, uint32_t i)

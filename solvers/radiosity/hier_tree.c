@@ -123,7 +123,6 @@ rp_status hier_nodes_init(hier_state *s, rp_error *err)
             nd->v[3] = nd->v[2];
         node_measure(nd);
         nd->face = (uint32_t)f;
-        nd->id = f;
         nd->parent = RP_NONE;
         nd->child = RP_NONE;
         const double *Le = s->faces[f].Le;
@@ -219,7 +218,6 @@ rp_status hier_subdivide(hier_state *s, uint32_t i, rp_error *err)
         c->parent = i;
         c->child = RP_NONE;
         c->depth = (uint16_t)(p->depth + 1);
-        c->id = hier_mix(p->id + (uint64_t)(k + 1) * UINT64_C(0x9e3779b97f4a7c15));
         node_measure(c);
         size_t ci = (size_t)first + (size_t)k;
         for (size_t b = 0; b < nb; b++) {
@@ -424,7 +422,7 @@ size_t hier_bytes(const hier_state *s)
     if (s->Y)
         b += s->cap_Y0 * sizeof(double) + s->nimp_hits * sizeof(hier_imp_hit);
     b += s->cap_links * sizeof(hier_link) + s->cap_start * sizeof(uint32_t);
-    b += s->nfaces * sizeof(hier_face) + s->cap_open * sizeof(double);
+    b += s->nfaces * sizeof(hier_face) + s->cap_open * sizeof *s->open;
     b += s->ff_scale ? s->cap_scale * sizeof(double) : 0; /* row sums (update_scale) */
     if (s->linear)
         b += s->cap_nodes * (sizeof(hier_basis) + 6 * s->nb * sizeof(double)) + s->cap_lin_K * 8 * sizeof(float) +
@@ -437,4 +435,17 @@ size_t hier_bytes(const hier_state *s)
         b += s->nunits * s->nunits * (sizeof(uint32_t) + sizeof(uint16_t)) + s->ncand * sizeof(uint32_t) +
              s->nfaces * sizeof(uint32_t) + s->nunits * (sizeof(uint32_t) + 2 * sizeof(rp_vec3));
     return b;
+}
+
+/* The root's id is its face's index; a child's mixes its parent's with its
+ * number among the four.  Computed by walking to the root rather than held
+ * (8 bytes a node; the walk is a few nanoseconds a level, once per set of
+ * a link's visibility rays). */
+uint64_t hier_node_id(const hier_state *s, const hier_node *nd)
+{
+    if (nd->parent == RP_NONE)
+        return nd->face;
+    const hier_node *p = &s->nodes[nd->parent];
+    const uint64_t k = (uint64_t)(nd - s->nodes) - p->child;
+    return hier_mix(hier_node_id(s, p) + (k + 1) * UINT64_C(0x9e3779b97f4a7c15));
 }
