@@ -992,15 +992,11 @@ Test(hier, linear_basis_is_orthonormal, .init = hsetup)
         memset(&nd, 0, sizeof nd);
         memcpy(nd.v, shapes[k], sizeof nd.v);
         nd.nverts = (uint16_t)nv[k];
-        /* area centroid, as hier_tree.c measures it */
+        /* the area, as hier_tree.c measures it (the centroid, hier_node_c,
+         * follows from it and the corners) */
         double at = 0;
-        rp_vec3 c = rp_v3(0, 0, 0);
-        for (int t = 1; t + 1 < nv[k]; t++) {
-            double ar = 0.5 * rp_v3_length(rp_v3_cross(rp_v3_sub(nd.v[t], nd.v[0]), rp_v3_sub(nd.v[t + 1], nd.v[0])));
-            c = rp_v3_madd(c, rp_v3_add(rp_v3_add(nd.v[0], nd.v[t]), nd.v[t + 1]), ar / 3.0);
-            at += ar;
-        }
-        nd.c = rp_v3_scale(c, 1.0 / at);
+        for (int t = 1; t + 1 < nv[k]; t++)
+            at += 0.5 * rp_v3_length(rp_v3_cross(rp_v3_sub(nd.v[t], nd.v[0]), rp_v3_sub(nd.v[t + 1], nd.v[0])));
         nd.area = at;
         hier_basis B;
         hier_basis_of(&nd, rp_v3(0, 0, 1), &B);
@@ -1146,7 +1142,7 @@ Test(hier, linear_basis_furnace, .init = hsetup, .timeout = 120)
             continue;
         for (int k = 0; k < nd->nverts; k++) {
             double B[HIER_MAX_BANDS];
-            rp_hierarchical_radiosity_at(s, nd->face, rp_v3_madd(nd->v[k], rp_v3_sub(nd->c, nd->v[k]), 1e-6), B);
+            rp_hierarchical_radiosity_at(s, nd->face, rp_v3_madd(nd->v[k], rp_v3_sub(hier_node_c(nd), nd->v[k]), 1e-6), B);
             worst = fmax(worst, fabs(B[0] / RP_PI - 2));
         }
     }
@@ -1173,7 +1169,7 @@ Test(hier, gouraud_furnace, .init = hsetup, .timeout = 120)
             continue;
         for (int k = 0; k < nd->nverts; k++) {
             /* Just inside the leaf, next to each corner. */
-            rp_vec3 x = rp_v3_madd(nd->v[k], rp_v3_sub(nd->c, nd->v[k]), 1e-6);
+            rp_vec3 x = rp_v3_madd(nd->v[k], rp_v3_sub(hier_node_c(nd), nd->v[k]), 1e-6);
             double B[HIER_MAX_BANDS];
             hier_vertices_eval(s, hv, nd->face, x, B);
             for (size_t b = 0; b < s->nb; b++)

@@ -170,16 +170,16 @@ static uint32_t build(hier_state *s, uint32_t *idx, sort_key *tmp, uint32_t lo, 
     k->parent = parent;
     k->first = lo;
     k->count = hi - lo;
-    rp_vec3 clo = s->nodes[idx[lo]].c, chi = clo;
+    rp_vec3 clo = hier_node_c(&s->nodes[idx[lo]]), chi = clo;
     for (uint32_t i = lo; i < hi; i++) {
-        rp_vec3 p = s->nodes[idx[i]].c;
+        rp_vec3 p = hier_node_c(&s->nodes[idx[i]]);
         clo = rp_v3(hier_min(clo.x, p.x), hier_min(clo.y, p.y), hier_min(clo.z, p.z));
         chi = rp_v3(hier_max(chi.x, p.x), hier_max(chi.y, p.y), hier_max(chi.z, p.z));
     }
     rp_vec3 ext = rp_v3_sub(chi, clo);
     int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
     for (uint32_t i = lo; i < hi; i++) {
-        rp_vec3 p = s->nodes[idx[i]].c;
+        rp_vec3 p = hier_node_c(&s->nodes[idx[i]]);
         tmp[i].key = axis == 0 ? p.x : (axis == 1 ? p.y : p.z);
         tmp[i].f = idx[i];
     }

@@ -451,7 +451,7 @@ static int vtx_point_values(const hier_state *s, hier_vertices *hv, size_t nleav
                 if (xi == nx) {
                     xi = nx < 32 ? nx++ : 31; /* (a vertex of more than 32 faces re-uses the last) */
                     xface[xi] = lf->face;
-                    xs[xi] = rp_v3_madd(t->p[v], rp_v3_sub(lf->c, t->p[v]), 1e-3);
+                    xs[xi] = rp_v3_madd(t->p[v], rp_v3_sub(hier_node_c(lf), t->p[v]), 1e-3);
                 }
                 if (s->linear) {
                     /* --basis linear: the leaf's own linear function

@@ -41,14 +41,44 @@
  * consecutive nodes with larger indices than their parent. */
 typedef struct hier_node {
     rp_vec3 v[4];      /* corners, counter-clockwise from the front (3 for triangles) */
-    rp_vec3 c;         /* centroid */
-    double area;
+    double area;       /* (its centroid is computed: hier_node_c) */
     uint32_t face;     /* the scene face this node is part of (= its root's index) */
     uint32_t parent;   /* RP_NONE for roots */
     uint32_t child;    /* first of four children, RP_NONE for a leaf */
     uint16_t nverts;   /* 3 or 4 */
     uint16_t depth;    /* 0 for roots */
 } hier_node;
+
+static inline double hier_tri_area(rp_vec3 a, rp_vec3 b, rp_vec3 c)
+{
+    return 0.5 * rp_v3_length(rp_v3_cross(rp_v3_sub(b, a), rp_v3_sub(c, a)));
+}
+
+/* The area (into *area) and area centroid of the polygon of a node's
+ * corners v (nverts 3 or 4; a convex quad is two triangles). */
+static inline rp_vec3 hier_polygon_c(const rp_vec3 *v, int nverts, double *area)
+{
+    rp_vec3 c1 = rp_v3_scale(rp_v3_add(rp_v3_add(v[0], v[1]), v[2]), 1.0 / 3.0);
+    double a1 = hier_tri_area(v[0], v[1], v[2]);
+    if (nverts == 3) {
+        *area = a1;
+        return c1;
+    }
+    double a2 = hier_tri_area(v[0], v[2], v[3]);
+    rp_vec3 c2 = rp_v3_scale(rp_v3_add(rp_v3_add(v[0], v[2]), v[3]), 1.0 / 3.0);
+    *area = a1 + a2;
+    return *area > 0 ? rp_v3_scale(rp_v3_add(rp_v3_scale(c1, a1), rp_v3_scale(c2, a2)), 1.0 / *area) : c1;
+}
+
+/* A node's area centroid, computed from its corners as it was when nodes
+ * held it (24 bytes a node): the same operations, so the same bits. */
+static inline rp_vec3 hier_node_c(const hier_node *nd)
+{
+    if (nd->nverts == 3)
+        return rp_v3_scale(rp_v3_add(rp_v3_add(nd->v[0], nd->v[1]), nd->v[2]), 1.0 / 3.0);
+    double area;
+    return hier_polygon_c(nd->v, nd->nverts, &area);
+}
 
 enum {
     HIER_LINK_PARTIAL = 1u << 0,  /* some visibility rays blocked */

@@ -86,9 +86,9 @@ void hier_basis_of(const hier_node *nd, rp_vec3 n, hier_basis *out)
     rp_vec3 t1, t2;
     rp_v3_basis(n, &t1, &t2);
     double M[3];
-    polygon_moments(nd->v, nd->nverts, nd->c, t1, t2, M);
+    polygon_moments(nd->v, nd->nverts, hier_node_c(nd), t1, t2, M);
     memset(out, 0, sizeof *out);
-    out->c = nd->c;
+    out->c = hier_node_c(nd);
     /* M = L L^T (Cholesky); phi = L^-1 (t1 . d, t2 . d) has the identity
      * as its second moments, and d = t1 (L phi)_0 + t2 (L phi)_1. */
     double l11 = M[0] > 0 ? sqrt(M[0]) : 0;
@@ -188,8 +188,8 @@ static void link_coefficients(const hier_state *s, uint32_t qi, const hier_link 
         hier_child_shapes(p, quarter);
         for (int c = 0; c < 4; c++) {
             psi_p[c][0] = quarter[c].area / p->area; /* (the weights of the mean) */
-            psi_p[c][1] = phi(bp, 0, quarter[c].c);
-            psi_p[c][2] = phi(bp, 1, quarter[c].c);
+            psi_p[c][1] = phi(bp, 0, hier_node_c(&quarter[c]));
+            psi_p[c][2] = phi(bp, 1, hier_node_c(&quarter[c]));
         }
     }
     rp_vec3 x[4];

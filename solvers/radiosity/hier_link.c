@@ -275,22 +275,32 @@ static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_nod
 
 /* ---- form-factor estimates ---- */
 
-double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, double far_ratio)
+/* hier_point_to_node with p's centroid pc, when the caller has it. */
+static double point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, const rp_vec3 *pc,
+                            double far_ratio)
 {
     const hier_face *fp = &s->faces[p->face];
     if (rp_v3_dot(fp->n, x) - fp->d <= 0)
         return 0; /* x sees the back of p (which is black and one-sided) */
-    rp_vec3 d = rp_v3_sub(p->c, x);
-    double r2 = rp_v3_dot(d, d);
-    if (far_ratio > 0 && r2 > far_ratio * hier_extent2(p)) {
-        /* A disk of p's area facing along its normal (Wallace, Elmquist &
-         * Haines 1989, eq. 6): F = A cos_q cos_p / (pi r^2 + A). */
-        double r = sqrt(r2);
-        double cq = rp_v3_dot(n, d) / r, cp = -rp_v3_dot(fp->n, d) / r;
-        if (cq > 0 && cp > 0)
-            return p->area * cq * cp / (RP_PI * r2 + p->area);
+    if (far_ratio > 0) {
+        rp_vec3 d = rp_v3_sub(pc ? *pc : hier_node_c(p), x);
+        double r2 = rp_v3_dot(d, d);
+        if (r2 > far_ratio * hier_extent2(p)) {
+            /* A disk of p's area facing along its normal (Wallace,
+             * Elmquist & Haines 1989, eq. 6): F = A cos_q cos_p / (pi r^2
+             * + A). */
+            double r = sqrt(r2);
+            double cq = rp_v3_dot(n, d) / r, cp = -rp_v3_dot(fp->n, d) / r;
+            if (cq > 0 && cp > 0)
+                return p->area * cq * cp / (RP_PI * r2 + p->area);
+        }
     }
     return hier_point_polygon(x, n, p->v, p->nverts);
+}
+
+double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, double far_ratio)
+{
+    return point_to_node(s, x, n, p, NULL, far_ratio);
 }
 
 /* The visibility rays of a link: m x m jittered strata on q paired with
@@ -430,16 +440,17 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
     int straddle = pmin < -tol || qmin < -tol;
     double F, Fmax, Fvar = 0;
     const int emitter = !fp->reflects;
-    rp_vec3 dc = rp_v3_sub(p->c, q->c);
+    const rp_vec3 qc = hier_node_c(q), pc = hier_node_c(p);
+    rp_vec3 dc = rp_v3_sub(pc, qc);
     if (!straddle && rp_v3_dot(dc, dc) > HIER_NEAR_RATIO * hier_extent2(q)) {
-        F = Fmax = hier_point_to_node(s, q->c, fq->n, p, HIER_DISK_RATIO);
+        F = Fmax = point_to_node(s, qc, fq->n, p, &pc, HIER_DISK_RATIO);
         if (emitter) {
             /* How much the kernel varies across q, from its four quarters. */
             rp_vec3 cc[4];
             double ca[4];
             hier_child_centroids(q, cc, ca);
             for (int k = 0; k < 4; k++)
-                Fvar = hier_max(Fvar, fabs(hier_point_to_node(s, cc[k], fq->n, p, HIER_DISK_RATIO) - F));
+                Fvar = hier_max(Fvar, fabs(point_to_node(s, cc[k], fq->n, p, &pc, HIER_DISK_RATIO) - F));
         }
     } else {
         /* Near pairs (the kernel varies across q: point estimates at the
@@ -467,7 +478,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
              * lamp: 0.009 at the quarters, 0.08 at the centre), so the
              * variation also counts the centroid; without it such a link
              * was never refined and kept the midpoint rule's 4 points. */
-            double fc = hier_point_to_node(s, q->c, fq->n, p, 0);
+            double fc = hier_point_to_node(s, qc, fq->n, p, 0);
             Fvar = hier_max(Fvar, fabs(fc - F));
         }
         if (straddle)
@@ -476,7 +487,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
              * the centroid, join the bound, so such a pair is refined
              * rather than lost. */
             for (int k = 0; k < q->nverts; k++) {
-                rp_vec3 x = rp_v3_madd(q->v[k], rp_v3_sub(q->c, q->v[k]), 0.01);
+                rp_vec3 x = rp_v3_madd(q->v[k], rp_v3_sub(qc, q->v[k]), 0.01);
                 Fmax = hier_max(Fmax, hier_point_to_node(s, x, fq->n, p, 0));
             }
     }
@@ -797,7 +808,7 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
 static int near_pair(const hier_state *s, uint32_t qi, const hier_link *l)
 {
     const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
-    rp_vec3 d = rp_v3_sub(p->c, q->c);
+    rp_vec3 d = rp_v3_sub(hier_node_c(p), hier_node_c(q));
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(q);
 }
 

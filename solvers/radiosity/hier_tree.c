@@ -20,27 +20,11 @@
 
 static inline rp_vec3 mid(rp_vec3 a, rp_vec3 b) { return rp_v3_scale(rp_v3_add(a, b), 0.5); }
 
-static double tri_area(rp_vec3 a, rp_vec3 b, rp_vec3 c)
-{
-    return 0.5 * rp_v3_length(rp_v3_cross(rp_v3_sub(b, a), rp_v3_sub(c, a)));
-}
-
-/* Area and area centroid of a node from its corners (a convex quad is two
- * triangles). */
+/* Area of a node from its corners (a convex quad is two triangles; its
+ * centroid, hier_node_c, weighs the two by these areas). */
 static void node_measure(hier_node *nd)
 {
-    if (nd->nverts == 3) {
-        nd->area = tri_area(nd->v[0], nd->v[1], nd->v[2]);
-        nd->c = rp_v3_scale(rp_v3_add(rp_v3_add(nd->v[0], nd->v[1]), nd->v[2]), 1.0 / 3.0);
-        return;
-    }
-    double a1 = tri_area(nd->v[0], nd->v[1], nd->v[2]);
-    double a2 = tri_area(nd->v[0], nd->v[2], nd->v[3]);
-    rp_vec3 c1 = rp_v3_scale(rp_v3_add(rp_v3_add(nd->v[0], nd->v[1]), nd->v[2]), 1.0 / 3.0);
-    rp_vec3 c2 = rp_v3_scale(rp_v3_add(rp_v3_add(nd->v[0], nd->v[2]), nd->v[3]), 1.0 / 3.0);
-    nd->area = a1 + a2;
-    nd->c = nd->area > 0 ? rp_v3_scale(rp_v3_add(rp_v3_scale(c1, a1), rp_v3_scale(c2, a2)), 1.0 / nd->area)
-                         : c1;
+    hier_polygon_c(nd->v, nd->nverts, &nd->area);
 }
 
 /* Every per-node array to room for cap nodes.  Returns 0 if a realloc
@@ -185,12 +169,7 @@ void hier_child_centroids(const hier_node *nd, rp_vec3 c[4], double area[4])
     rp_vec3 cv[4][4];
     child_corners(nd, cv);
     for (int k = 0; k < 4; k++) {
-        hier_node t;
-        memcpy(t.v, cv[k], sizeof t.v);
-        t.nverts = nd->nverts;
-        node_measure(&t);
-        c[k] = t.c;
-        area[k] = t.area;
+        c[k] = hier_polygon_c(cv[k], nd->nverts, &area[k]);
     }
 }
 
@@ -266,7 +245,7 @@ int hier_polygon_prepare(const rp_vec3 *poly, int m, double *cum)
 {
     cum[0] = 0;
     for (int k = 1; k + 1 < m; k++)
-        cum[k] = cum[k - 1] + tri_area(poly[0], poly[k], poly[k + 1]);
+        cum[k] = cum[k - 1] + hier_tri_area(poly[0], poly[k], poly[k + 1]);
     return m >= 3 && cum[m - 2] > 0;
 }
 

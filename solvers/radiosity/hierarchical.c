@@ -704,7 +704,8 @@ static void source_value(const hier_state *s, uint32_t qi, hier_link *l, const d
         const hier_node *q = &s->nodes[qi];
         rp_vec3 n = s->faces[q->face].n, np = s->faces[p->face].n;
         double w[4], ws = 0;
-        rp_vec3 dp = rp_v3_sub(p->c, q->c);
+        const rp_vec3 qc = hier_node_c(q);
+        rp_vec3 dp = rp_v3_sub(hier_node_c(p), qc);
         /* Only the ratios matter: far from the source (r^2 above 16 times
          * its area, the near test of hier_link.c) the point-to-point
          * kernel A_k cos cos / r^2 at the children's centroids gives them
@@ -714,11 +715,11 @@ static void source_value(const hier_state *s, uint32_t qi, hier_link *l, const d
         for (int k = 0; k < 4; k++) {
             const hier_node *c = &s->nodes[p->child + k];
             if (far) {
-                rp_vec3 d = rp_v3_sub(c->c, q->c);
+                rp_vec3 d = rp_v3_sub(hier_node_c(c), qc);
                 double r2 = rp_v3_dot(d, d);
                 w[k] = c->area * hier_max(rp_v3_dot(n, d), 0) * hier_max(-rp_v3_dot(np, d), 0) / (r2 * r2);
             } else
-                w[k] = fabs(hier_point_polygon(q->c, n, c->v, c->nverts));
+                w[k] = fabs(hier_point_polygon(qc, n, c->v, c->nverts));
             ws += w[k];
         }
         for (int k = 0; k < 4; k++)
