@@ -70,7 +70,8 @@ static rp_status grow_nodes(hier_state *s, size_t need, rp_error *err)
     if (need <= s->cap_nodes)
         return RP_OK;
     /* Half as much again (a face root each for a scene of 75k faces
-     * must not hold room for 260k nodes, 232 bytes each). */
+     * must not hold room for 260k nodes, 189 bytes each with their
+     * radiosities). */
     size_t cap = s->cap_nodes ? s->cap_nodes + s->cap_nodes / 2 : 1024;
     if (cap < need)
         cap = need;
