@@ -54,6 +54,9 @@ extern "C" {
 
 #define RP_SIMPLIFY_MIN_FACES 1000
 #define RP_SIMPLIFY_AUTO_TOLERANCE 1.1e-3
+/* The two as text, for --simplify's help (solvers/solver.h). */
+#define RP_SIMPLIFY_TEXT_(x) #x
+#define RP_SIMPLIFY_TEXT(x) RP_SIMPLIFY_TEXT_(x)
 
 typedef struct rp_solution rp_solution;
 

@@ -251,13 +251,15 @@ rp_status rp_options_ray_offset(const rp_options *o, struct rp_raycast *rc, rp_e
  * solution mesh to solve on (rp_solution_scene), which the caller destroys
  * with rp_solution_destroy.  Messages (what each mesh became) go to
  * o->log.  When o->want asks for no image, the solution has no maps back
- * to the full scene (rp_solution_drop_maps). */
+ * to the full scene (rp_solution_drop_maps).  Where it is expanded,
+ * geometry/simplify.h must be included (its constants name the numbers). */
 #define RP_SIMPLIFY_OPTION(fallback)                                                         \
     {"simplify", "off|auto|R",                                                                \
-     "solve on a simplified copy of each triangle mesh of 1000 triangles or more (CGAL edge " \
-     "collapse, Garland-Heckbert quadrics; borders kept; cut where it is not a 2-manifold): auto " \
-     "collapses while the quadric error times the mean triangle area stays below (0.11% of "  \
-     "the scene's diagonal)^4, whatever the tessellation; R in (0,1) keeps that fraction of the " \
+     "solve on a simplified copy of each triangle mesh of " RP_SIMPLIFY_TEXT(RP_SIMPLIFY_MIN_FACES) \
+     " triangles or more (CGAL edge collapse, Garland-Heckbert quadrics; borders kept; cut where " \
+     "it is not a 2-manifold): auto collapses while the quadric error times the mean triangle "   \
+     "area stays below (" RP_SIMPLIFY_TEXT(RP_SIMPLIFY_AUTO_TOLERANCE) " x the scene's "           \
+     "diagonal)^4, whatever the tessellation; R in (0,1) keeps that fraction of the "             \
      "edges; camera rays and final gathers still see the full meshes",                       \
      fallback}
 struct rp_solution;

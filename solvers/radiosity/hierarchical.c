@@ -44,6 +44,7 @@
 #include "../../geometry/discontinuity.h"
 #include "../../geometry/log.h"
 #include "../../geometry/mesh.h"
+#include "../../geometry/simplify.h"
 #include "system.h"
 
 /* Defaults, relative to the scene (see the option help).  Chosen on the
