@@ -1143,7 +1143,8 @@ Test(hier, linear_basis_furnace, .init = hsetup, .timeout = 120)
             continue;
         for (int k = 0; k < nd->nverts; k++) {
             double B[HIER_MAX_BANDS];
-            rp_hierarchical_radiosity_at(s, nd->face, rp_v3_madd(nd->v[k], rp_v3_sub(hier_node_c(nd), nd->v[k]), 1e-6), B);
+            rp_vec3 x = rp_v3_madd(nd->v[k], rp_v3_sub(hier_node_c(nd), nd->v[k]), 1e-6);
+            rp_hierarchical_radiosity_at(s, nd->face, x, B);
             worst = fmax(worst, fabs(B[0] / RP_PI - 2));
         }
     }

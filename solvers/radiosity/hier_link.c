@@ -388,7 +388,8 @@ static double value_rays(const hier_state *s, const link_rays *set, const hier_n
                          double *rays)
 {
     unsigned open = 0, valid = 0;
-    return link_rays_cast(s, set, hier_key(s->seed ^ HIER_VALUE_KEY, hier_node_id(s, q), hier_node_id(s, p)), &open, &valid, rays);
+    const uint64_t key = hier_key(s->seed ^ HIER_VALUE_KEY, hier_node_id(s, q), hier_node_id(s, p));
+    return link_rays_cast(s, set, key, &open, &valid, rays);
 }
 
 /* Completes a link qi <- l->src link_eval left pending, whose unoccluded
