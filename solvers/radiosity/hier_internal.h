@@ -92,9 +92,11 @@ enum {
                                      shares (hierarchical.c, source_value) */
     HIER_LINK_COEF = 1u << 5,     /* --basis linear: share[0], share[1] hold
                                      the link's slot in lin_K (hier_linear.c) */
-    HIER_LINK_PENDING = 1u << 6   /* F is not set yet: the value's rays wait
+    HIER_LINK_PENDING = 1u << 6,  /* F is not set yet: the value's rays wait
                                      for the oracle (hier_refine), which
                                      does not read F */
+    HIER_LINK_GONE = 1u << 7      /* within a refinement pass: the stored
+                                     link leaves the list (split or dropped) */
 };
 
 /* A link's shares of its source's four children are kept in 13 bits each

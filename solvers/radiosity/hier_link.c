@@ -627,39 +627,41 @@ static rp_status links_merge(hier_state *s, size_t m, size_t mn, const hier_link
     for (size_t i = mn + 1; i <= nn; i++)
         start[i] = (uint32_t)m;
     if (n > 0) {
-        /* nstart[r]: where receiver r's new links start among the new
-         * ones; fill[r] the next free place while ord is filled. */
+        /* end[r]: counts, then where receiver r's new links start among
+         * the new ones, then (once ord is filled through it) where they
+         * end, which is where receiver r + 1's start: one array, not a
+         * second one to fill through (4 bytes a node, 5 MiB of the
+         * Cornell box's peak at 10^6 leaves). */
         uint32_t *ord = malloc(n * sizeof *ord);
-        uint32_t *nstart = calloc(2 * (nn + 1), sizeof *nstart);
-        if (!ord || !nstart) {
+        uint32_t *end = calloc(nn + 1, sizeof *end);
+        if (!ord || !end) {
             free(ord);
-            free(nstart);
+            free(end);
             return rp_error_set(err, RP_ERR_NOMEM, "hierarchical: out of memory sorting %zu links", n);
         }
-        uint32_t *fill = nstart + nn + 1;
         for (size_t k = 0; k < n; k++)
-            nstart[recv[k] + 1]++;
+            end[recv[k] + 1]++;
         for (size_t i = 0; i < nn; i++)
-            nstart[i + 1] += nstart[i];
-        memcpy(fill, nstart, nn * sizeof *fill);
+            end[i + 1] += end[i];
         for (size_t k = 0; k < n; k++)
-            ord[fill[recv[k]]++] = (uint32_t)k;
+            ord[end[recv[k]]++] = (uint32_t)k;
         /* From the last receiver down: receiver r's kept links
          * [start[r], start[r + 1]) move up by the new links of the
-         * receivers before it (nstart[r]), its own new ones follow them.
-         * Both land at or above where r's kept links were, so nothing
-         * not yet moved is overwritten. */
+         * receivers before it (the first end[r - 1]), its own new ones
+         * follow them.  Both land at or above where r's kept links were,
+         * so nothing not yet moved is overwritten. */
         for (size_t r = nn; r-- > 0;) {
-            const size_t lo = start[r], mc = start[r + 1] - lo, nc = nstart[r + 1] - nstart[r];
-            const size_t at = lo + nstart[r];
+            const size_t first = r ? end[r - 1] : 0;
+            const size_t lo = start[r], mc = start[r + 1] - lo, nc = end[r] - first;
+            const size_t at = lo + first;
             if (mc && at != lo)
                 memmove(links + at, links + lo, mc * sizeof *links);
             for (size_t j = 0; j < nc; j++)
-                links[at + mc + j] = add[ord[nstart[r] + j]];
+                links[at + mc + j] = add[ord[first + j]];
             start[r + 1] = (uint32_t)(at + mc + nc);
         }
         free(ord);
-        free(nstart);
+        free(end);
     }
     n += m;
     s->start_nn = nn;
@@ -757,6 +759,10 @@ done:
     free(recv);
     return st;
 }
+
+/* An invisible link the oracle keeps is dropped (hier_refine): its
+ * value's rays were all blocked too. */
+static int link_dropped(const hier_link *l) { return (l->flags & HIER_LINK_INVISIBLE) && !(l->F > 0); }
 
 /* The refinement decision for link qi <- l->src: 0 keep, 1 split the
  * receiver, 2 split the source. */
@@ -863,7 +869,6 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     const size_t nn0 = s->nnodes, nl0 = s->nlinks;
     hier_link *orig = s->links;
     const uint32_t *ostart = s->link_start;
-    unsigned char *oact = NULL;   /* per stored link: 0 kept, 1 split, 3 dropped */
     hier_link *fresh = NULL, *kept = NULL, *cand = NULL;
     /* their receivers (the stored links' are known from ostart); a split
      * link is its receiver, its source and its mode alone */
@@ -877,30 +882,34 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
     int changed = 0;
     /* What the pass uses besides the links it keeps: freed before those
      * are merged into the list (the Cornell box at 10^6 leaves peaked 720
-     * MiB above what it held, 216 MiB since). */
-    void **scratch[] = {(void **)&oact, (void **)&fresh, (void **)&fresh_r, (void **)&freshF, (void **)&cand,
+     * MiB above what it held, 216 MiB since, 145 MiB since the stored
+     * links' fates are a bit in their flags). */
+    void **scratch[] = {(void **)&fresh, (void **)&fresh_r, (void **)&freshF, (void **)&cand,
                         (void **)&candF, (void **)&code, (void **)&fact, (void **)&kdead, (void **)&mark,
                         (void **)&split_s, (void **)&split_r, (void **)&smode};
 
-    oact = malloc(nl0 ? nl0 : 1);
-    if (!oact)
-        goto nomem;
+    /* A stored link that leaves the list (split or dropped) is marked
+     * HIER_LINK_GONE in place: a byte per stored link beside the list was
+     * 102 MiB of the Cornell box's peak at 10^6 leaves.  Where round 0
+     * needs the oracle's mode again it asks it again (decide reads
+     * nothing this loop changes). */
     size_t nsplit = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) reduction(+ : nsplit) if (nl0 > 8192)
     for (long i = 0; i < (long)nn0; i++)
-        for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++) {
-            oact[k] = (unsigned char)decide(s, (uint32_t)i, &orig[k]);
-            nsplit += oact[k] != 0;
-        }
+        for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++)
+            if (decide(s, (uint32_t)i, &orig[k])) {
+                orig[k].flags |= HIER_LINK_GONE;
+                nsplit++;
+            }
     for (size_t k = 0; k < nl0; k++)
-        if (!oact[k] && (orig[k].flags & HIER_LINK_INVISIBLE) && !(orig[k].F > 0)) {
+        if (!(orig[k].flags & HIER_LINK_GONE) && link_dropped(&orig[k])) {
             /* An invisible link the oracle would not refine is dropped:
              * 16 blocked rays between two large elements may miss a
              * penumbra, so it is dropped only once it is this fine, and
              * only if its second set of rays (the value's) was blocked
              * too: dropped on the first set alone, the penumbrae those
              * rays missed would come out too dark on average. */
-            oact[k] = 3;
+            orig[k].flags |= HIER_LINK_GONE;
             s->links_invisible++;
             changed = 1;
         }
@@ -936,18 +945,23 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
              * too little and the others too much. */
             for (uint32_t i = 0; i < nn0; i++)
                 for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++)
-                    if (oact[k] == 1)
+                    if ((orig[k].flags & HIER_LINK_GONE) && decide(s, i, &orig[k]) == 1)
                         mark[i] = 1;
+            /* A near link taken down goes with its receiver (mode 1), though
+             * the oracle would keep it; of the links it keeps, the dropped
+             * ones are those link_dropped names. */
             for (uint32_t i = 0; i < nn0; i++)
                 for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++)
-                    if (oact[k] == 0 && mark[i] && near_pair(s, i, &orig[k]))
-                        oact[k] = 1;
+                    if (!(orig[k].flags & HIER_LINK_GONE) && mark[i] && near_pair(s, i, &orig[k]))
+                        orig[k].flags |= HIER_LINK_GONE;
             for (uint32_t i = 0; i < nn0; i++)
                 for (uint32_t k = ostart[i]; k < ostart[i + 1]; k++)
-                    if (oact[k] == 1 || oact[k] == 2) {
+                    if (orig[k].flags & HIER_LINK_GONE) {
+                        int mode = decide(s, i, &orig[k]);
+                        if (!mode && link_dropped(&orig[k]))
+                            continue; /* dropped, not split */
                         mark[i] = 0;
-                        ADD_SPLIT(i, orig[k], oact[k]);
-                        oact[k] = 1; /* gone from the stored list */
+                        ADD_SPLIT(i, orig[k], mode ? mode : 1);
                     }
         } else {
             if (nfresh == 0)
@@ -997,8 +1011,8 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
                     if (r >= nn0)
                         continue;
                     for (uint32_t j = ostart[r]; j < ostart[r + 1]; j++)
-                        if (oact[j] == 0 && near_pair(s, r, &orig[j])) {
-                            oact[j] = 1;
+                        if (!(orig[j].flags & HIER_LINK_GONE) && near_pair(s, r, &orig[j])) {
+                            orig[j].flags |= HIER_LINK_GONE;
                             ADD_SPLIT(r, orig[j], 1);
                         }
                 }
@@ -1085,7 +1099,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             const size_t hi = start[i + 1];
             start[i] = (uint32_t)m;
             for (size_t k = lo; k < hi; k++)
-                if (oact[k] == 0)
+                if (!(orig[k].flags & HIER_LINK_GONE))
                     orig[m++] = orig[k];
             lo = hi;
         }
