@@ -380,6 +380,7 @@ typedef struct hier_state {
     double min_area_contact;       /* min_area / 4^contact_levels */
     double partial_weight;
     double invisible_weight;
+    double variation_weight;       /* --variation-weight (hier_link.c source_varies) */
     double tolerance;
     int tolerance_given;
     unsigned long max_iterations;

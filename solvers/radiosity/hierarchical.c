@@ -81,6 +81,12 @@ static const rp_option_spec hier_options[] = {
      "links whose visibility rays were all blocked are judged by W x their unoccluded form factor "
      "(refined towards a penumbra they may hide, then dropped)",
      "0.25"},
+    {"variation-weight", "W",
+     "a link the BF test keeps still splits its source while rho_receiver x F x W x the source's "
+     "difference in radiosity from its siblings exceeds EPS, when the receiver is within 4 of the "
+     "source's extents (where the kernel varies across the source): the floor beside a box, dark "
+     "at its foot, as the box side sees it.  Constant basis, no importance; 0: off",
+     "10"},
     {"vis-rays", "N",
      "visibility rays per set (rounded to a square, at most 64); a link the oracle keeps casts two "
      "independent sets, one to decide its refinement and one for the visibility it keeps, so that "
@@ -496,6 +502,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         (st = rp_options_double(o, "min-area", 1e-15, 1, &s->min_area_rel, err)) != RP_OK ||
         (st = rp_options_double(o, "partial-weight", 0, 1e6, &s->partial_weight, err)) != RP_OK ||
         (st = rp_options_double(o, "invisible-weight", 0, 1e6, &s->invisible_weight, err)) != RP_OK ||
+        (st = rp_options_double(o, "variation-weight", 0, 1e6, &s->variation_weight, err)) != RP_OK ||
         (st = rp_options_double(o, "tolerance", 0, 1, &s->tolerance, err)) != RP_OK ||
         (st = rp_options_uint(o, "vis-rays", 1, 64, &vis, err)) != RP_OK ||
         (st = rp_options_uint(o, "max-iterations", 1, 1000000000ul, &maxit, err)) != RP_OK ||
