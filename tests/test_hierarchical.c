@@ -159,6 +159,22 @@ static void solve_hier(hrun *r, const rp_scene *scene, unsigned want, int thread
     hrun_solve(r);
 }
 
+/* The path tracer's surface averages and their standard errors, from
+ * `samples` probe points a surface (the independent reference of the
+ * tests that compare against it). */
+static void probe_pathtrace(const rp_scene *scene, const char *samples, double *L, double *se)
+{
+    hrun p;
+    rp_error err = {""};
+    const char *kv[] = {"samples", samples, "batch", "16384", NULL};
+    cr_assert_eq(hrun_start(&p, &rp_solver_pathtrace, scene, RP_WANT_SURFACES, 0, kv, &err), RP_OK, "%s",
+                 err.message);
+    hrun_solve(&p);
+    rp_estimate pe = {.surface_radiance = L, .surface_stderr = se};
+    cr_assert_eq(p.type->estimate(p.state, &pe, &err), RP_OK, "%s", err.message);
+    hrun_end(&p);
+}
+
 /* ---- the contour kernel ------------------------------------------------ */
 
 Test(hier, contour_kernel, .init = hsetup)
@@ -300,14 +316,7 @@ Test(hier, cube_against_pathtrace_and_uniform, .init = hsetup, .timeout = 600)
     rp_hierarchical_stats(r.state, &st);
     hrun_end(&r);
 
-    hrun p;
-    const char *kv[] = {"samples", "262144", "batch", "16384", NULL};
-    cr_assert_eq(hrun_start(&p, &rp_solver_pathtrace, scene, RP_WANT_SURFACES, 0, kv, &err), RP_OK, "%s",
-                 err.message);
-    hrun_solve(&p);
-    rp_estimate pe = {.surface_radiance = pt, .surface_stderr = se};
-    cr_assert_eq(p.type->estimate(p.state, &pe, &err), RP_OK, "%s", err.message);
-    hrun_end(&p);
+    probe_pathtrace(scene, "262144", pt, se);
 
     /* And the fine uniform solution (Gauss-Seidel on 4800 elements, 800
      * a face): within 1%. */
@@ -1747,15 +1756,8 @@ static void sealed_check(const rp_scene *scene, const char *const *modes, const 
                  room = surface_index(scene, "room");
     double *pt = calloc(ns, sizeof *pt), *se = calloc(ns, sizeof *se), *h = calloc(ns, sizeof *h);
     cr_assert(pt && se && h);
-    hrun p;
     rp_error err = {""};
-    const char *pk[] = {"samples", "65536", "batch", "16384", NULL};
-    cr_assert_eq(hrun_start(&p, &rp_solver_pathtrace, scene, RP_WANT_SURFACES, 0, pk, &err), RP_OK, "%s",
-                 err.message);
-    hrun_solve(&p);
-    rp_estimate pe = {.surface_radiance = pt, .surface_stderr = se};
-    cr_assert_eq(p.type->estimate(p.state, &pe, &err), RP_OK, "%s", err.message);
-    hrun_end(&p);
+    probe_pathtrace(scene, "65536", pt, se);
     cr_assert_eq(pt[in], 0.0, "the path tracer sees light inside: %g (the scene is not sealed)", pt[in]);
     for (int m = 0; m < nmodes; m++) {
         hrun r;
@@ -1949,14 +1951,7 @@ Test(hier, cluster_elephant_against_pathtrace, .init = hsetup, .timeout = 600)
     cr_assert_eq(r.type->estimate(r.state, &e, &err), RP_OK, "%s", err.message);
     hrun_end(&r);
     cr_assert_gt(st.clusters, 0);
-    hrun p;
-    const char *pk[] = {"samples", "262144", "batch", "16384", NULL};
-    cr_assert_eq(hrun_start(&p, &rp_solver_pathtrace, scene, RP_WANT_SURFACES, 0, pk, &err), RP_OK, "%s",
-                 err.message);
-    hrun_solve(&p);
-    rp_estimate pe = {.surface_radiance = pt, .surface_stderr = se};
-    cr_assert_eq(p.type->estimate(p.state, &pe, &err), RP_OK, "%s", err.message);
-    hrun_end(&p);
+    probe_pathtrace(scene, "262144", pt, se);
     const double total = rp_scene_total_area(scene);
     size_t checked = 0;
     for (size_t s = 0; s < ns; s++) {
@@ -2566,25 +2561,13 @@ Test(hier, variation_weight_floor_seen_by_a_box_side, .init = hsetup, .timeout =
         "quad short-right  black  82 0 225  82 165 225  130 165 65  130 0 65\n"
         "quad short-back   black  240 0 272  240 165 272  82 165 225  82 0 225\n");
     const size_t ns = rp_scene_nsurfaces(scene), nb = rp_scene_nbands(scene);
-    const rp_surface *surf = rp_scene_surfaces(scene);
-    size_t front = ns;
-    for (size_t i = 0; i < ns; i++)
-        if (!strcmp(surf[i].name, "short-front"))
-            front = i;
-    cr_assert_lt(front, ns);
+    const size_t front = surface_index(scene, "short-front");
     double *on = calloc(ns * nb, sizeof *on), *off = calloc(ns * nb, sizeof *off);
     double *pt = calloc(ns * nb, sizeof *pt), *se = calloc(ns * nb, sizeof *se);
     double mean_on[3] = {0}, mean_off[3] = {0};
     cr_assert(on && off && pt && se && nb == 3);
     rp_error err = {""};
-    hrun p;
-    const char *pk[] = {"samples", "4194304", "batch", "65536", NULL};
-    cr_assert_eq(hrun_start(&p, &rp_solver_pathtrace, scene, RP_WANT_SURFACES, 0, pk, &err), RP_OK, "%s",
-                 err.message);
-    hrun_solve(&p);
-    rp_estimate pe = {.surface_radiance = pt, .surface_stderr = se};
-    cr_assert_eq(p.type->estimate(p.state, &pe, &err), RP_OK, "%s", err.message);
-    hrun_end(&p);
+    probe_pathtrace(scene, "4194304", pt, se);
     const int nseeds = 4;
     for (int k = 1; k <= nseeds; k++) {
         hrun r;

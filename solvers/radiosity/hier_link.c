@@ -34,6 +34,9 @@
  * blocked is refined with invisible_weight times its unoccluded form
  * factor (16 blocked rays between large elements can miss a penumbra, but
  * only a small part of one) and dropped once the oracle lets it be.
+ * A link the test keeps still splits its source where the source's
+ * radiosity varies under a kernel that varies across it (source_varies,
+ * --variation-weight): B x F misses that where the source is dim.
  * When a receiver is split its near links go down with it, re-evaluated
  * at the children: a near source's kernel varies across the receiver, and
  * an estimate at the parent's centre pushed down unchanged would give the

@@ -83,9 +83,9 @@ static const rp_option_spec hier_options[] = {
      "0.25"},
     {"variation-weight", "W",
      "a link the BF test keeps still splits its source while rho_receiver x F x W x the source's "
-     "difference in radiosity from its siblings exceeds EPS, when the receiver is within 4 of the "
-     "source's extents (where the kernel varies across the source): the floor beside a box, dark "
-     "at its foot, as the box side sees it.  Constant basis, no importance; 0: off",
+     "difference in radiosity from its siblings exceeds --bf-epsilon's threshold, when the receiver "
+     "is within 4 of the source's extents (where the kernel varies across the source): the floor "
+     "beside a box, dark at its foot, as the box side sees it.  Constant basis, no importance; 0: off",
      "10"},
     {"vis-rays", "N",
      "visibility rays per set (rounded to a square, at most 64); a link the oracle keeps casts two "
