@@ -931,9 +931,9 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
 
     /* A stored link that leaves the list (split or dropped) is marked
      * HIER_LINK_GONE in place: a byte per stored link beside the list was
-     * 102 MiB of the Cornell box's peak at 10^6 leaves.  Where round 0
-     * needs the oracle's mode again it asks it again (decide reads
-     * nothing this loop changes). */
+     * 74 MiB of the pass in which the Cornell box at 10^6 leaves peaked.
+     * Where round 0 needs the oracle's mode again it asks it again
+     * (decide reads nothing this loop changes). */
     size_t nsplit = 0;
 #pragma omp parallel for num_threads(s->threads) schedule(dynamic, 256) reduction(+ : nsplit) if (nl0 > 8192)
     for (long i = 0; i < (long)nn0; i++)
