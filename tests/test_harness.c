@@ -297,6 +297,15 @@ Test(harness, method_specs)
     cr_expect(strstr(err.message, "elements") != NULL, "%s", err.message);
     cr_expect_eq(rp_method_spec_parse("nosuchmethod", &m, &err), RP_ERR_INPUT);
     cr_expect_eq(rp_method_spec_parse("pathtrace:spp", &m, &err), RP_ERR_INPUT); /* needs a value */
+    /* An option taking a word or a number ("auto|FRAC"): both, and
+     * nothing else. */
+    cr_expect_eq(rp_method_spec_parse("hierarchical:cluster-area=1e-3", &m, &err), RP_OK, "%s", err.message);
+    cr_expect_eq(rp_method_spec_parse("hierarchical:cluster-area=auto", &m, &err), RP_OK, "%s", err.message);
+    cr_expect_eq(rp_method_spec_parse("hierarchical:variation-weight=10", &m, &err), RP_OK, "%s", err.message);
+    cr_expect_eq(rp_method_spec_parse("hierarchical:simplify=0.1", &m, &err), RP_OK, "%s", err.message);
+    cr_expect_eq(rp_method_spec_parse("hierarchical:cluster-area=big", &m, &err), RP_ERR_INPUT);
+    cr_expect_eq(rp_method_spec_parse("hierarchical:cluster=maybe", &m, &err), RP_ERR_INPUT);
+    cr_expect_eq(rp_method_spec_parse("hierarchical:vis-rays=2.5", &m, &err), RP_ERR_INPUT);
     rp_method_spec *list = NULL;
     size_t n = 0;
     cr_assert_eq(rp_method_list_parse("pathtrace,southwell:elements=40", &list, &n, &err), RP_OK);

@@ -2264,8 +2264,9 @@ Test(hier, importance_none_is_the_default, .init = hsetup, .timeout = 120)
     double *B[2];
     for (int k = 0; k < 2; k++) {
         hrun r;
-        const char *none[] = {"bf-epsilon", "0.05", "importance", "none", NULL};
-        const char *dflt[] = {"bf-epsilon", "0.05", NULL};
+        /* (--variation-weight follows the question too: pinned) */
+        const char *none[] = {"bf-epsilon", "0.05", "importance", "none", "variation-weight", "0", NULL};
+        const char *dflt[] = {"bf-epsilon", "0.05", "variation-weight", "0", NULL};
         solve_hier(&r, scene, k == 0 ? RP_WANT_SURFACES : RP_WANT_SURFACES | RP_WANT_IMAGE, 0, k == 0 ? none : dflt);
         cr_assert_eq(((hier_state *)r.state)->importance, HIER_IMP_NONE);
         h[k] = calloc(ns * nb, sizeof *h[k]);
@@ -2605,6 +2606,26 @@ Test(hier, variation_weight_floor_seen_by_a_box_side, .init = hsetup, .timeout =
     free(off);
     free(pt);
     free(se);
+    rp_scene_destroy(scene);
+}
+
+/* --variation-weight auto: 10 for surface averages alone (probe), 0 when
+ * an image is wanted; a number is taken as given. */
+Test(hier, variation_weight_follows_the_question, .init = hsetup)
+{
+    rp_scene *scene = rp_test_load("scenes/cornell.scene");
+    const unsigned wants[3] = {RP_WANT_SURFACES, RP_WANT_IMAGE, RP_WANT_SURFACES | RP_WANT_IMAGE};
+    const double want_w[3] = {10, 0, 0};
+    const char *autokv[] = {"variation-weight", "auto", NULL}, *three[] = {"variation-weight", "3", NULL};
+    for (int k = 0; k < 9; k++) {
+        hrun r;
+        rp_error err = {""};
+        const char *const *kv = k < 3 ? NULL : k < 6 ? autokv : three;
+        cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, wants[k % 3], 0, kv, &err), RP_OK, "%s",
+                     err.message);
+        cr_expect_eq(((hier_state *)r.state)->variation_weight, k < 6 ? want_w[k % 3] : 3.0, "case %d", k);
+        hrun_end(&r);
+    }
     rp_scene_destroy(scene);
 }
 

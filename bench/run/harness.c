@@ -19,25 +19,40 @@
 
 /* The form of an option's value, checked before any run so that a bench
  * fails at once rather than after its other methods: one of the words of
- * an "a|b|c" argument, else a number (a whole one >= 0 for "N"); ranges are
- * the method's own check at init. */
-static int value_fits(const rp_option_spec *spec, const char *v)
+ * an "a|b|c" argument, or a number where the argument (or one of its
+ * alternatives, as in "auto|FRAC") is a placeholder in capitals (a whole
+ * one >= 0 for "N"); ranges are the method's own check at init. */
+/* 1 if v is a number the placeholder arg (N: a count; any other
+ * capitals, as FRAC, EPS, W: a real) takes. */
+static int number_fits(const char *arg, size_t len, const char *v)
 {
-    if (strchr(spec->arg, '|')) {
-        size_t n = strlen(v);
-        for (const char *w = spec->arg; *w;) {
-            size_t len = strcspn(w, "|");
-            if (len == n && strncmp(w, v, n) == 0)
-                return 1;
-            w += len + (w[len] == '|');
-        }
-        return 0;
-    }
     char *end;
     double x = strtod(v, &end);
     if (end == v || *end || !isfinite(x))
         return 0;
-    return strcmp(spec->arg, "N") != 0 || (x >= 0 && x == floor(x));
+    return !(len == 1 && arg[0] == 'N') || (x >= 0 && x == floor(x));
+}
+
+/* An alternative of an option's arg in capitals is a placeholder for a
+ * number ("auto|FRAC" takes auto or a number); the others are words. */
+static int placeholder(const char *w, size_t len)
+{
+    for (size_t i = 0; i < len; i++)
+        if (w[i] < 'A' || w[i] > 'Z')
+            return 0;
+    return len > 0;
+}
+
+static int value_fits(const rp_option_spec *spec, const char *v)
+{
+    const size_t n = strlen(v);
+    for (const char *w = spec->arg; *w;) {
+        size_t len = strcspn(w, "|");
+        if (placeholder(w, len) ? number_fits(w, len, v) : (len == n && strncmp(w, v, n) == 0))
+            return 1;
+        w += len + (w[len] == '|');
+    }
+    return 0;
 }
 
 rp_status rp_method_spec_parse(const char *text, rp_method_spec *m, rp_error *err)
@@ -92,7 +107,7 @@ rp_status rp_method_spec_parse(const char *text, rp_method_spec *m, rp_error *er
                                 p);
         if (eq && !value_fits(spec, eq + 1))
             return rp_error_set(err, RP_ERR_INPUT, "method spec '%s': %s=%s: expected %s%s", text, p, eq + 1,
-                                strchr(spec->arg, '|') ? "one of " : "a number for ", spec->arg);
+                                strchr(spec->arg, '|') ? "one of " : "a value for ", spec->arg);
         m->keys[m->count] = spec->name;
         m->values[m->count++] = eq ? eq + 1 : "1";
     }
