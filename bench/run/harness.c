@@ -17,11 +17,6 @@
 
 /* ------------------------------------------------------------- specs */
 
-/* The form of an option's value, checked before any run so that a bench
- * fails at once rather than after its other methods: one of the words of
- * an "a|b|c" argument, or a number where the argument (or one of its
- * alternatives, as in "auto|FRAC") is a placeholder in capitals (a whole
- * one >= 0 for "N"); ranges are the method's own check at init. */
 /* 1 if v is a number the placeholder arg (N: a count; any other
  * capitals, as FRAC, EPS, W: a real) takes. */
 static int number_fits(const char *arg, size_t len, const char *v)
@@ -43,6 +38,11 @@ static int placeholder(const char *w, size_t len)
     return len > 0;
 }
 
+/* The form of an option's value, checked before any run so that a bench
+ * fails at once rather than after its other methods: one of the words of
+ * an "a|b|c" argument, or a number where the argument (or one of its
+ * alternatives, as in "auto|FRAC") is a placeholder in capitals (a whole
+ * one >= 0 for "N"); ranges are the method's own check at init. */
 static int value_fits(const rp_option_spec *spec, const char *v)
 {
     const size_t n = strlen(v);

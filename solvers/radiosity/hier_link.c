@@ -785,13 +785,12 @@ static int link_dropped(const hier_link *l) { return (l->flags & HIER_LINK_INVIS
  * this).  For the constant basis without importance (a linear element
  * carries its own gradient). */
 static int source_varies(const hier_state *s, const hier_node *q, const hier_node *p, const double *rho,
-                         double Fs)
+                         const double *Bp, double Fs)
 {
     const size_t nb = s->nb;
     if (!(s->variation_weight > 0) || s->linear || s->importance != HIER_IMP_NONE || p->parent == RP_NONE ||
         0.25 * p->area < s->min_area)
         return 0;
-    const double *Bp = s->B + (size_t)(p - s->nodes) * nb;
     const uint32_t c0 = s->nodes[p->parent].child;
     double dv = 0;
     for (uint32_t c = 0; c < 4; c++) {
@@ -830,7 +829,7 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
      * (Smits, Arvo & Greenberg 1994, sec. 4): e x F x A_q / cl_area. */
     double scale = s->clustering ? hier_min(1.0, q->area / s->cl_area) : 1.0;
     if (!(e * hier_link_ferr(l) * scale > s->bf_eps))
-        return source_varies(s, q, p, rho, hier_link_ferr(l) * scale) ? 2 : 0;
+        return source_varies(s, q, p, rho, Bp, hier_link_ferr(l) * scale) ? 2 : 0;
     /* Pairs where one element crosses the other's plane meet along a
      * line (a box standing on the floor) or nearly: there the kernel is
      * singular and the light discontinuous (a D0 discontinuity, Heckbert

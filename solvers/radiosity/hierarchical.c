@@ -453,6 +453,23 @@ static rp_status update_scale(hier_state *s, rp_error *err)
     return RP_OK;
 }
 
+/* An option taking auto or a number in [0, hi]: auto follows what the run
+ * is asked for, the value surf for surface averages alone (probe), else
+ * img (an image, or both). */
+static rp_status auto_by_question(const hier_state *s, const rp_options *o, const char *key, const char *surf,
+                                  const char *img, double hi, double *out, rp_error *err)
+{
+    const char *v = rp_options_word(o, key);
+    if (!v || strcmp(v, "auto") == 0) {
+        unsigned w = s->want & (RP_WANT_IMAGE | RP_WANT_SURFACES);
+        *out = atof(w == RP_WANT_SURFACES ? surf : img);
+        return RP_OK;
+    }
+    if (rp_options_double(o, key, 0, hi, out, err) != RP_OK)
+        return rp_error_set(err, RP_ERR_INPUT, "--%s: '%s' is not auto or a number in [0, %g]", key, v, hi);
+    return RP_OK;
+}
+
 static rp_status hier_init(void *state, const rp_scene *scene, const rp_options *o, rp_error *err)
 {
     hier_state *s = state;
@@ -527,24 +544,17 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
      * 1.05-2.67% against 1.29-2.39%), and the bunny scene solves in about
      * 55% of the time with 40% less memory (docs/design.md); an image
      * shows each small element's radiosity, so it keeps 1e-3. */
-    const char *ca = rp_options_word(o, "cluster-area");
-    if (!ca || strcmp(ca, "auto") == 0) {
-        unsigned w = s->want & (RP_WANT_IMAGE | RP_WANT_SURFACES);
-        s->cl_area_rel = atof(w == RP_WANT_SURFACES ? HIER_CLUSTER_AREA_SURFACES : HIER_CLUSTER_AREA_IMAGE);
-    } else if (rp_options_double(o, "cluster-area", 0, 1, &s->cl_area_rel, err) != RP_OK)
-        return rp_error_set(err, RP_ERR_INPUT, "--cluster-area: '%s' is not auto or a number in [0, 1]", ca);
+    if ((st = auto_by_question(s, o, "cluster-area", HIER_CLUSTER_AREA_SURFACES, HIER_CLUSTER_AREA_IMAGE, 1,
+                               &s->cl_area_rel, err)) != RP_OK)
+        return st;
     /* --variation-weight auto: what the run is asked for, as above.  On
      * the Cornell box at the defaults the test took the worst surface
      * average from 1.19% to 0.81% of the path tracer for about 20% more
      * time, and the image's RMSE from 0.001677 to 0.001680 for 31% more
      * (docs/design.md, stop 40). */
-    const char *vw = rp_options_word(o, "variation-weight");
-    if (!vw || strcmp(vw, "auto") == 0) {
-        unsigned w = s->want & (RP_WANT_IMAGE | RP_WANT_SURFACES);
-        s->variation_weight = atof(w == RP_WANT_SURFACES ? HIER_VARIATION_SURFACES : HIER_VARIATION_IMAGE);
-    } else if (rp_options_double(o, "variation-weight", 0, 1e6, &s->variation_weight, err) != RP_OK)
-        return rp_error_set(err, RP_ERR_INPUT, "--variation-weight: '%s' is not auto or a number in [0, 1e6]",
-                            vw);
+    if ((st = auto_by_question(s, o, "variation-weight", HIER_VARIATION_SURFACES, HIER_VARIATION_IMAGE, 1e6,
+                               &s->variation_weight, err)) != RP_OK)
+        return st;
     s->cluster_rays = (unsigned)crays;
     s->cluster_face_rays = (unsigned)cfrays;
     const char *cm = rp_options_word(o, "cluster"); /* defaults: the specs' */
