@@ -313,14 +313,14 @@ static void node_changes(const hier_state *s, uint32_t a, rp_vec3 x, rp_vec3 n, 
     double Bp[HIER_MAX_BANDS];
     for (uint32_t k = s->link_start[a]; k < s->link_start[a + 1]; k++) {
         const hier_link *l = &s->links[k];
-        const hier_node *p = &s->nodes[l->src];
+        const hier_node *p = &s->nodes[hier_link_src(l)];
         double F = hier_point_to_node(s, x, n, p, VERTEX_DISK_RATIO);
         if (l->flags & HIER_LINK_PARTIAL)
             F *= point_visibility(s, x, n, p, hier_key(key, k, 0), rays);
         link_source(s, l, Bp);
         /* the form factor the sweep gathered through: F_l over a's open
          * fraction (hier_open.c) */
-        const double Fg = l->F / hier_open_divisor(s, a);
+        const double Fg = hier_link_F(l) / hier_open_divisor(s, a);
         *dF += F - Fg;
         for (size_t b = 0; b < nb; b++)
             dg[b] += (F - Fg) * Bp[b];

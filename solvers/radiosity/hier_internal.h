@@ -99,32 +99,67 @@ enum {
                                      link leaves the list (split or dropped) */
 };
 
-/* A link's shares of its source's four children are kept in 13 bits each
+/* A link's shares of its source's four children are kept in 10 bits each
  * as multiples of 1/HIER_SHARE_ONE; the fourth is what the first three
  * leave, so they add up to exactly one (hier_link_set_shares). */
-#define HIER_SHARE_ONE 8191u
-#define HIER_SHARE_BITS 13
+#define HIER_SHARE_ONE 1023u
+#define HIER_SHARE_BITS 10
 
-/* A one-way link: the receiver gathers rho F B_src through it.  16 bytes:
+/* A one-way link: the receiver gathers rho F B_src through it.  14 bytes:
  * links are most of the method's memory (the bunny scene: 0.5M links,
- * 0.4M cluster links, 1M cluster entries; the Cornell box at 83k leaves
- * 7.7M links), and single precision is ample for one link's form factor,
- * the oracle's bound needs 8 bits of mantissa (rounded up, so it stays a
- * bound) and a share of a source's child 13 bits (their sums are taken in
- * double).  The receiver is not stored: the list is sorted by it
- * (link_start), and links not yet in the list carry theirs beside them. */
+ * 0.4M cluster links, 1M cluster entries; the Cornell box at 10^6 leaves
+ * 107M links), and a link's form factor needs no more than the upper 24
+ * bits of a float (15 bits of mantissa, rounded: 1.5e-5 relative, far
+ * below its visibility rays' noise), the oracle's bound 8 bits of
+ * mantissa (rounded up, so it stays a bound) and a share of a source's
+ * child 10 bits (their sums are taken in double).  The receiver is not
+ * stored: the list is sorted by it (link_start), and links not yet in the
+ * list carry theirs beside them.  Every member is a byte or two, so the
+ * struct needs no padding; read and write src and F through
+ * hier_link_src, hier_link_F and their setters. */
 typedef struct hier_link {
-    uint32_t src;
-    float F;          /* form-factor estimate times visibility */
+    uint16_t src_[2]; /* the source node (hier_link_src) */
     uint16_t F_err;   /* the oracle's form-factor bound (unoccluded estimate
                          for partial or straddling links), packed by
                          hier_bound_pack: read it with hier_link_ferr */
+    uint8_t F_[3];    /* form-factor estimate times visibility: the upper 24
+                         bits of a float (hier_link_F) */
     uint8_t flags;
-    uint8_t share[5]; /* three 13-bit shares of the source's children 0-2
+    uint8_t share[4]; /* three 10-bit shares of the source's children 0-2
                          in the kernel seen from the receiver's centre, when
                          flags has HIER_LINK_SHARES (child 3 has the rest);
                          or, with HIER_LINK_COEF, a 32-bit slot */
 } hier_link;
+
+static inline uint32_t hier_link_src(const hier_link *l) { return (uint32_t)l->src_[0] | (uint32_t)l->src_[1] << 16; }
+
+static inline void hier_link_set_src(hier_link *l, uint32_t src)
+{
+    l->src_[0] = (uint16_t)(src & 0xffffu);
+    l->src_[1] = (uint16_t)(src >> 16);
+}
+
+static inline float hier_link_F(const hier_link *l)
+{
+    uint32_t u = (uint32_t)l->F_[0] << 8 | (uint32_t)l->F_[1] << 16 | (uint32_t)l->F_[2] << 24;
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+/* F rounded to the nearest 24-bit value (a carry out of the mantissa steps
+ * the exponent, as it should). */
+static inline void hier_link_set_F(hier_link *l, double F)
+{
+    float f = (float)F;
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    if ((u & 0x7f800000u) != 0x7f800000u) /* not inf or NaN */
+        u += 0x80u;
+    l->F_[0] = (uint8_t)(u >> 8);
+    l->F_[1] = (uint8_t)(u >> 16);
+    l->F_[2] = (uint8_t)(u >> 24);
+}
 
 /* --basis linear (hier_linear.c): a node's linear basis functions
  * phi_k(x) = dot(g[k], x - c), k = 0, 1, orthonormal with the constant
@@ -634,18 +669,18 @@ static inline double hier_bound_unpack(uint16_t b)
 
 static inline double hier_link_ferr(const hier_link *l) { return hier_bound_unpack(l->F_err); }
 
-/* The 40 bits of l->share as one number, and back. */
-static inline uint64_t hier_link_share_bits(const hier_link *l)
+/* The 32 bits of l->share as one number, and back. */
+static inline uint32_t hier_link_share_bits(const hier_link *l)
 {
-    uint64_t v = 0;
-    for (int k = 4; k >= 0; k--)
+    uint32_t v = 0;
+    for (int k = 3; k >= 0; k--)
         v = v << 8 | l->share[k];
     return v;
 }
 
-static inline void hier_link_set_share_bits(hier_link *l, uint64_t v)
+static inline void hier_link_set_share_bits(hier_link *l, uint32_t v)
 {
-    for (int k = 0; k < 5; k++, v >>= 8)
+    for (int k = 0; k < 4; k++, v >>= 8)
         l->share[k] = (uint8_t)(v & 0xffu);
 }
 
@@ -656,12 +691,12 @@ static inline void hier_link_set_shares(hier_link *l, const double w[4])
 {
     double run = 0;
     uint32_t prev = 0;
-    uint64_t v = 0;
+    uint32_t v = 0;
     for (int k = 0; k < 3; k++) {
         run += w[k];
         double c = floor(run * HIER_SHARE_ONE + 0.5);
         uint32_t ck = c <= prev ? prev : (c >= HIER_SHARE_ONE ? HIER_SHARE_ONE : (uint32_t)c);
-        v |= (uint64_t)(ck - prev) << (HIER_SHARE_BITS * k);
+        v |= (ck - prev) << (HIER_SHARE_BITS * k);
         prev = ck;
     }
     hier_link_set_share_bits(l, v);
@@ -692,7 +727,7 @@ static inline double hier_linear_restrict(const double a[2], const double A[2][2
 static inline void hier_link_shares(const hier_link *l, double w[4])
 {
     uint32_t rest = HIER_SHARE_ONE;
-    uint64_t v = hier_link_share_bits(l);
+    uint32_t v = hier_link_share_bits(l);
     for (int k = 0; k < 3; k++, v >>= HIER_SHARE_BITS) {
         uint32_t sk = (uint32_t)(v & HIER_SHARE_ONE);
         w[k] = (double)sk / HIER_SHARE_ONE;

@@ -174,12 +174,12 @@ static int receiver_rule(const hier_node *q, rp_vec3 x[4], double w[4])
     return 4;
 }
 
-/* The coupling coefficients of link qi <- l->src (K[0][0] = F), see the
+/* The coupling coefficients of link qi <- l's source (K[0][0] = F), see the
  * top. */
 static void link_coefficients(const hier_state *s, uint32_t qi, const hier_link *l, float out[8])
 {
-    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
-    const hier_basis *bq = &s->basis[qi], *bp = &s->basis[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
+    const hier_basis *bq = &s->basis[qi], *bp = &s->basis[hier_link_src(l)];
     const rp_vec3 nq = s->faces[q->face].n;
     const int src_linear = s->faces[p->face].reflects; /* a pure emitter is uniform */
     hier_node quarter[4];
@@ -239,7 +239,7 @@ static void link_coefficients(const hier_state *s, uint32_t qi, const hier_link 
                 K[i][1] /= M[0][0];
     }
     /* The visibility (and the estimate) of the constant basis's F. */
-    double v = K[0][0] > 0 ? (double)l->F / K[0][0] : 0;
+    double v = K[0][0] > 0 ? (double)hier_link_F(l) / K[0][0] : 0;
     for (int m = 1; m < 9; m++)
         out[m - 1] = (float)(v * K[m / 3][m % 3]);
 }
@@ -247,7 +247,7 @@ static void link_coefficients(const hier_state *s, uint32_t qi, const hier_link 
 void hier_linear_coef(const hier_state *s, const hier_link *l, double K[3][3])
 {
     const float *c = s->lin_K + (size_t)hier_link_slot(l) * 8;
-    K[0][0] = l->F;
+    K[0][0] = hier_link_F(l);
     for (int m = 1; m < 9; m++)
         K[m / 3][m % 3] = c[m - 1];
 }
@@ -325,8 +325,8 @@ void hier_linear_gather(const hier_state *s, uint32_t q, double *acc, double *ac
         const hier_link *l = &s->links[k];
         /* K_01 K_02 K_10 K_11 K_12 K_20 K_21 K_22 (hier_linear_coef) */
         const float *K = s->lin_K + (size_t)hier_link_slot(l) * 8;
-        const double F = l->F;
-        const double *Bp = s->B + (size_t)l->src * nb, *B1p = s->B1 + (size_t)l->src * nb * 2;
+        const double F = hier_link_F(l);
+        const double *Bp = s->B + (size_t)hier_link_src(l) * nb, *B1p = s->B1 + (size_t)hier_link_src(l) * nb * 2;
         for (size_t b = 0; b < nb; b++) {
             double c0 = Bp[b], c1 = B1p[2 * b], c2 = B1p[2 * b + 1];
             acc[b] += F * c0 + K[0] * c1 + K[1] * c2;

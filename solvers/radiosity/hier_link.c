@@ -395,14 +395,14 @@ static double value_rays(const hier_state *s, const link_rays *set, const hier_n
     return link_rays_cast(s, set, key, &open, &valid, rays);
 }
 
-/* Completes a link qi <- l->src link_eval left pending, whose unoccluded
+/* Completes a link qi <- its source link_eval left pending, whose unoccluded
  * form factor is F: l->F = F x the value's visible fraction. */
 static void link_value(const hier_state *s, uint32_t qi, hier_link *l, double F, double *rays)
 {
-    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
     link_rays set;
     link_rays_prepare(&set, q, p, &s->faces[q->face], &s->faces[p->face], (l->flags & HIER_LINK_STRADDLE) != 0);
-    l->F = (float)(F * value_rays(s, &set, q, p, rays));
+    hier_link_set_F(l, F * value_rays(s, &set, q, p, rays));
     l->flags = (uint8_t)(l->flags & ~HIER_LINK_PENDING);
 }
 
@@ -509,7 +509,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
     double vis = 1;
     uint32_t flags = straddle ? HIER_LINK_STRADDLE : 0;
     *Fu = F;
-    out->src = pi;
+    hier_link_set_src(out, pi);
     if (shaft_blocked(s, q, p)) {
         flags |= HIER_LINK_TESTED;
         link_rays set;
@@ -539,7 +539,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
         }
     }
     hier_link_set_share_bits(out, 0);
-    out->F = flags & HIER_LINK_PENDING ? 0.0f : (float)(F * vis);
+    hier_link_set_F(out, flags & HIER_LINK_PENDING ? 0.0 : F * vis);
     double F_err = Fmax;
     if (flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE))
         F_err = s->partial_weight * Fmax;
@@ -765,7 +765,7 @@ done:
 
 /* An invisible link the oracle keeps is dropped (hier_refine): its
  * value's rays were all blocked too. */
-static int link_dropped(const hier_link *l) { return (l->flags & HIER_LINK_INVISIBLE) && !(l->F > 0); }
+static int link_dropped(const hier_link *l) { return (l->flags & HIER_LINK_INVISIBLE) && !(hier_link_F(l) > 0); }
 
 /* 1 if link q <- p, which the BF test keeps, should split its source p
  * for the variation of p's radiosity under a kernel that varies across
@@ -804,14 +804,14 @@ static int source_varies(const hier_state *s, const hier_node *q, const hier_nod
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(p);
 }
 
-/* The refinement decision for link qi <- l->src: 0 keep, 1 split the
+/* The refinement decision for link qi <- its source: 0 keep, 1 split the
  * receiver, 2 split the source. */
 static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
 {
     const size_t nb = s->nb;
-    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
     const double *rho = s->faces[q->face].rho;
-    const double *Bp = s->B + (size_t)l->src * nb;
+    const double *Bp = s->B + (size_t)hier_link_src(l) * nb;
     double e = 0;
     if (s->importance != HIER_IMP_NONE && !(l->flags & HIER_LINK_INVISIBLE))
         /* Weighted by importance (hier_importance.c; Smits, Arvo &
@@ -820,7 +820,7 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
          * light of a penumbra its rays missed with it, so it goes only
          * as deep as without importance. */
         e = hier_importance_error(s, rho, s->B + (size_t)qi * nb, s->Y + (size_t)qi * nb,
-                                  s->faces[p->face].rho, Bp, s->Y + (size_t)l->src * nb);
+                                  s->faces[p->face].rho, Bp, s->Y + (size_t)hier_link_src(l) * nb);
     else
         for (size_t b = 0; b < nb; b++)
             e = hier_max(e, rho[b] * Bp[b]);
@@ -854,7 +854,7 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
  * (the same test link_eval uses to integrate over the receiver). */
 static int near_pair(const hier_state *s, uint32_t qi, const hier_link *l)
 {
-    const hier_node *q = &s->nodes[qi], *p = &s->nodes[l->src];
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
     rp_vec3 d = rp_v3_sub(hier_node_c(p), hier_node_c(q));
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(q);
 }
@@ -970,7 +970,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             !hier_grow((void **)&split_r, &capsr, ns + 1, sizeof *split_r) ||      \
             !hier_grow((void **)&smode, &capsm, ns + 1, 1))                        \
             goto nomem;                                                            \
-        split_s[ns] = (L).src;                                                     \
+        split_s[ns] = hier_link_src(&(L));                                         \
         split_r[ns] = (R);                                                         \
         smode[ns] = (unsigned char)(MODE);                                         \
         ns++;                                                                      \
@@ -1074,7 +1074,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             for (size_t k = 0; k < nfresh; k++) {
                 if (fact[k])
                     continue;
-                if ((fresh[k].flags & HIER_LINK_INVISIBLE) && !(fresh[k].F > 0))
+                if ((fresh[k].flags & HIER_LINK_INVISIBLE) && !(hier_link_F(&fresh[k]) > 0))
                     s->links_invisible++;
                 else {
                     kept_r[nkept] = fresh_r[k];

@@ -345,7 +345,7 @@ static double own_sum(const hier_state *s, size_t i)
     double own = 0;
     if (s->link_start)
         for (uint32_t k = s->link_start[i]; k < s->link_start[i + 1]; k++)
-            own += s->links[k].F;
+            own += hier_link_F(&s->links[k]);
     if (s->cl_nff && i < s->cl_nn)
         own += s->cl_nff[i];
     return own;
@@ -713,9 +713,9 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
 void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, double *out)
 {
     const size_t nb = s->nb;
-    const hier_node *p = &s->nodes[l->src];
+    const hier_node *p = &s->nodes[hier_link_src(l)];
     if (p->child == RP_NONE || !(l->flags & HIER_LINK_SHARES)) {
-        memcpy(out, X + (size_t)l->src * nb, nb * sizeof *out);
+        memcpy(out, X + (size_t)hier_link_src(l) * nb, nb * sizeof *out);
         return;
     }
     double w[4];
@@ -731,7 +731,7 @@ void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, 
 
 static void source_value(const hier_state *s, uint32_t qi, hier_link *l, const double *X, double *out)
 {
-    const hier_node *p = &s->nodes[l->src];
+    const hier_node *p = &s->nodes[hier_link_src(l)];
     /* --basis linear: the source's own linear function carries what the
      * shares would (hier_linear.c), and share[] holds the link's slot. */
     if (p->child != RP_NONE && !(l->flags & (HIER_LINK_SHARES | HIER_LINK_COEF)) && !s->linear) {
@@ -823,7 +823,7 @@ static double hier_sweep(hier_state *s)
         for (uint32_t k = start[qi]; k < start[qi + 1]; k++) {
             double Bp[HIER_MAX_BANDS];
             source_radiosity(s, (uint32_t)qi, &links[k], Bp);
-            double F = links[k].F;
+            double F = hier_link_F(&links[k]);
             for (size_t b = 0; b < nb; b++)
                 acc[b] += F * Bp[b];
         }
@@ -936,8 +936,8 @@ static void importance_sweep(hier_state *s)
         for (uint32_t k = start[qi]; k < start[qi + 1]; k++) {
             double Yp[HIER_MAX_BANDS];
             source_value(s, (uint32_t)qi, &links[k], Y, Yp);
-            const double *rho = s->faces[s->nodes[links[k].src].face].rho;
-            double F = links[k].F;
+            const double *rho = s->faces[s->nodes[hier_link_src(&links[k])].face].rho;
+            double F = hier_link_F(&links[k]);
             for (size_t b = 0; b < nb; b++)
                 acc[b] += F * rho[b] * Yp[b];
         }
