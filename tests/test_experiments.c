@@ -22,18 +22,23 @@ static void nolog(void *ctx, const char *m)
     (void)m;
 }
 
-static void run_quick(const char *name, const char *root, const char *cache)
+/* The quick form of experiment name, with its runs cut to budget seconds
+ * each where budget > 0 (`--budget`; the runs that stop by time are the
+ * tests' fixed cost, paid once plain and once under the sanitizers). */
+static void run_quick_budget(const char *name, const char *root, const char *cache, double budget)
 {
     const rp_experiment *e = rp_experiment_lookup(name);
     cr_assert_not_null(e, "%s", name);
     char out[256];
     snprintf(out, sizeof out, "%s/%s", root, name);
     rp_experiment_params p = {.size = sizeof p, .experiment = e, .quick = 1, .out_dir = out, .cache_dir = cache,
-                              .scenes_dir = RP_SOURCE_DIR "/scenes", .threads = 2, .log = nolog};
+                              .scenes_dir = RP_SOURCE_DIR "/scenes", .threads = 2, .log = nolog, .budget = budget};
     rp_error err;
     rp_error_clear(&err);
     cr_assert_eq(e->run(&p, &err), RP_OK, "%s: %s", name, err.message);
 }
+
+static void run_quick(const char *name, const char *root, const char *cache) { run_quick_budget(name, root, cache, 0); }
 
 static char *read_out(const char *root, const char *name, const char *file)
 {
@@ -135,7 +140,7 @@ Test(experiments, cornell_box_quick_forms_hold_their_claims, .timeout = 900)
 
     /* cornell: plain Monte Carlo falls as N^-1/2 against samples, and every
      * Monte Carlo run's error falls from its first checkpoint to its last */
-    run_quick("cornell", root, cache);
+    run_quick_budget("cornell", root, cache, 0.5);
     reference_resolves_all(root, "cornell");
     char *json = read_out(root, "cornell", "summary.json"), *csv = read_out(root, "cornell", "runs.csv");
     double slope = summary_number(json, "pathtrace:sampler=random", "\"slope_samples\"", "slope");
@@ -153,7 +158,7 @@ Test(experiments, cornell_box_quick_forms_hold_their_claims, .timeout = 900)
      * Runs stop by time, so their sample counts differ a little: each
      * final RMSE is brought to one sample count by the N^-1/2 of plain
      * Monte Carlo (which favours random, the slowest to converge). */
-    run_quick("samplers", root, cache);
+    run_quick_budget("samplers", root, cache, 0.5);
     reference_resolves_all(root, "samplers");
     json = read_out(root, "samplers", "summary.json");
     double rnd = summary_number(json, "pathtrace:sampler=random", "\"final\"", "rmse") *
@@ -177,7 +182,7 @@ Test(experiments, cornell_box_quick_forms_hold_their_claims, .timeout = 900)
 
     /* hierarchy: links grow about linearly with leaves (exponent well
      * below the 2 of a full matrix) */
-    run_quick("hierarchy", root, cache);
+    run_quick_budget("hierarchy", root, cache, 1.0);
     reference_resolves_all(root, "hierarchy");
     csv = read_out(root, "hierarchy", "links.csv");
     double leaves[8], links[8];
