@@ -396,7 +396,8 @@ static double value_rays(const hier_state *s, const link_rays *set, const hier_n
 }
 
 /* Completes a link qi <- its source link_eval left pending, whose unoccluded
- * form factor is F: l->F = F x the value's visible fraction. */
+ * form factor is F: its form factor becomes F x the value's visible
+ * fraction. */
 static void link_value(const hier_state *s, uint32_t qi, hier_link *l, double F, double *rays)
 {
     const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
