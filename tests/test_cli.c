@@ -801,3 +801,35 @@ Test(cli, output_format_follows_the_extension)
     rp_run_free(&c);
     rp_run_free(&d);
 }
+
+/* bench says when --target lies at or below the reference's own noise (an
+ * RMSE against a path-traced reference is, in the mean, sqrt(error^2 +
+ * its noise^2)), and not when the target lies above it: a 2-spp reference
+ * on the Cornell box, whose noise is far above 1e-4 and far below 10. */
+Test(cli, bench_target_below_the_reference_noise_is_named, .timeout = 120)
+{
+    char dir[] = "/tmp/radpt-target-XXXXXX";
+    cr_assert_not_null(mkdtemp(dir));
+    const char *targets[2] = {"1e-4", "10"};
+    for (int k = 0; k < 2; k++) {
+        char args[512];
+        snprintf(args, sizeof args,
+                 "bench scenes/cornell.scene --methods pathtrace:spp=1 --budget 0.1 --checkpoints 1 --seeds 1 "
+                 "--reference-spp 2 --reference-samples 64 --cache %s/refs --target %s -o %s/b%d",
+                 dir, targets[k], dir, k);
+        rp_run r = rp_run_radpt(args);
+        cr_assert_eq(r.status, 0, "'%s': %s", args, r.err);
+        const char *note = strstr(r.out, "note: the target is at or below the reference's own noise (RMSE standard "
+                                         "error ");
+        if (k == 0) {
+            cr_assert_not_null(note, "%s", r.out);
+            double se = strtod(note + strlen("note: the target is at or below the reference's own noise (RMSE "
+                                             "standard error "),
+                               NULL);
+            cr_expect(se > 1e-4 && se < 10, "reference noise %g", se);
+        } else
+            cr_expect_null(note, "%s", r.out);
+        rp_run_free(&r);
+    }
+    rp_test_rmtree(dir);
+}

@@ -238,6 +238,15 @@ static void print_summary_table(const rp_bench *b)
     if (isfinite(b->target))
         printf("target RMSE %.4g (%s)\n", b->target, b->target_auto ? "automatic: the geometric mean of the best "
                                                                        "and worst final RMSE" : "--target");
+    /* An RMSE measured against a path-traced reference is, in the mean,
+     * sqrt(error^2 + the reference's own noise^2): a target at or below
+     * that noise is out of reach whatever a method does (the Cornell box's
+     * 2,048-spp reference: 0.00136). */
+    if (isfinite(b->target) && b->ref && b->ref->rmse_se > 0 && b->target <= b->ref->rmse_se)
+        printf("note: the target is at or below the reference's own noise (RMSE standard error %.3g): measured "
+               "against this reference no run can be expected to reach it; report.md's debiased RMSE estimates the "
+               "error against the truth, and a longer reference (--reference-spp N) has less noise\n",
+               b->ref->rmse_se);
 }
 
 /* Copies DIR/NAME to path (atomically), for --export-json / --export-csv. */
