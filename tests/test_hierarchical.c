@@ -2140,10 +2140,11 @@ Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout
  * bound must stay a bound, at most 2^-7 above the value over the whole
  * range a bound takes (the closed form of rounding up to 8 bits of
  * mantissa); the form factor must come back within 2^-16 of itself
- * (rounding to 15 bits of mantissa, after the float's own 2^-24), 0 as 0; the shares must be whole
- * steps of 1/1023 adding up to exactly 1023 of them, each within one step
- * of what was stored (they are rounded through their running sum); a
- * source and a slot must come back whole, their top bits included. */
+ * (rounding to 15 bits of mantissa, after the float's own 2^-24), 0 as
+ * 0; the shares must be whole steps of 1/1023 adding up to exactly 1023
+ * of them, each within one step of what was stored (they are rounded
+ * through their running sum); a source and a slot must come back whole,
+ * their top bits included. */
 Test(hier, link_packing_keeps_bounds_shares_and_slots, .init = hsetup)
 {
     cr_assert_eq(sizeof(hier_link), 14);

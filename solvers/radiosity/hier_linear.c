@@ -178,8 +178,9 @@ static int receiver_rule(const hier_node *q, rp_vec3 x[4], double w[4])
  * top. */
 static void link_coefficients(const hier_state *s, uint32_t qi, const hier_link *l, float out[8])
 {
-    const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
-    const hier_basis *bq = &s->basis[qi], *bp = &s->basis[hier_link_src(l)];
+    const uint32_t pi = hier_link_src(l);
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[pi];
+    const hier_basis *bq = &s->basis[qi], *bp = &s->basis[pi];
     const rp_vec3 nq = s->faces[q->face].n;
     const int src_linear = s->faces[p->face].reflects; /* a pure emitter is uniform */
     hier_node quarter[4];
@@ -326,7 +327,8 @@ void hier_linear_gather(const hier_state *s, uint32_t q, double *acc, double *ac
         /* K_01 K_02 K_10 K_11 K_12 K_20 K_21 K_22 (hier_linear_coef) */
         const float *K = s->lin_K + (size_t)hier_link_slot(l) * 8;
         const double F = hier_link_F(l);
-        const double *Bp = s->B + (size_t)hier_link_src(l) * nb, *B1p = s->B1 + (size_t)hier_link_src(l) * nb * 2;
+        const size_t pi = hier_link_src(l);
+        const double *Bp = s->B + pi * nb, *B1p = s->B1 + pi * nb * 2;
         for (size_t b = 0; b < nb; b++) {
             double c0 = Bp[b], c1 = B1p[2 * b], c2 = B1p[2 * b + 1];
             acc[b] += F * c0 + K[0] * c1 + K[1] * c2;

@@ -810,9 +810,10 @@ static int source_varies(const hier_state *s, const hier_node *q, const hier_nod
 static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
 {
     const size_t nb = s->nb;
-    const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
+    const uint32_t pi = hier_link_src(l);
+    const hier_node *q = &s->nodes[qi], *p = &s->nodes[pi];
     const double *rho = s->faces[q->face].rho;
-    const double *Bp = s->B + (size_t)hier_link_src(l) * nb;
+    const double *Bp = s->B + (size_t)pi * nb;
     double e = 0;
     if (s->importance != HIER_IMP_NONE && !(l->flags & HIER_LINK_INVISIBLE))
         /* Weighted by importance (hier_importance.c; Smits, Arvo &
@@ -821,7 +822,7 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
          * light of a penumbra its rays missed with it, so it goes only
          * as deep as without importance. */
         e = hier_importance_error(s, rho, s->B + (size_t)qi * nb, s->Y + (size_t)qi * nb,
-                                  s->faces[p->face].rho, Bp, s->Y + (size_t)hier_link_src(l) * nb);
+                                  s->faces[p->face].rho, Bp, s->Y + (size_t)pi * nb);
     else
         for (size_t b = 0; b < nb; b++)
             e = hier_max(e, rho[b] * Bp[b]);

@@ -713,9 +713,10 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
 void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, double *out)
 {
     const size_t nb = s->nb;
-    const hier_node *p = &s->nodes[hier_link_src(l)];
+    const uint32_t pi = hier_link_src(l);
+    const hier_node *p = &s->nodes[pi];
     if (p->child == RP_NONE || !(l->flags & HIER_LINK_SHARES)) {
-        memcpy(out, X + (size_t)hier_link_src(l) * nb, nb * sizeof *out);
+        memcpy(out, X + (size_t)pi * nb, nb * sizeof *out);
         return;
     }
     double w[4];
