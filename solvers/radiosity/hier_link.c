@@ -1076,7 +1076,7 @@ rp_status hier_refine(hier_state *s, size_t *refined, rp_error *err)
             for (size_t k = 0; k < nfresh; k++) {
                 if (fact[k])
                     continue;
-                if ((fresh[k].flags & HIER_LINK_INVISIBLE) && !(hier_link_F(&fresh[k]) > 0))
+                if (link_dropped(&fresh[k]))
                     s->links_invisible++;
                 else {
                     kept_r[nkept] = fresh_r[k];
