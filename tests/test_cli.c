@@ -819,13 +819,12 @@ Test(cli, bench_target_below_the_reference_noise_is_named, .timeout = 120)
                  dir, targets[k], dir, k);
         rp_run r = rp_run_radpt(args);
         cr_assert_eq(r.status, 0, "'%s': %s", args, r.err);
-        const char *note = strstr(r.out, "note: the target is at or below the reference's own noise (RMSE standard "
-                                         "error ");
+        static const char prefix[] = "note: the target is at or below the reference's own noise (RMSE standard "
+                                     "error ";
+        const char *note = strstr(r.out, prefix);
         if (k == 0) {
             cr_assert_not_null(note, "%s", r.out);
-            double se = strtod(note + strlen("note: the target is at or below the reference's own noise (RMSE "
-                                             "standard error "),
-                               NULL);
+            double se = strtod(note + strlen(prefix), NULL);
             cr_expect(se > 1e-4 && se < 10, "reference noise %g", se);
         } else
             cr_expect_null(note, "%s", r.out);
