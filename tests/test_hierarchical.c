@@ -1974,30 +1974,47 @@ Test(hier, cluster_elephant_against_pathtrace, .init = hsetup, .timeout = 600)
     }
     cr_assert_geq(checked, 8 * nb, "%zu values checked", checked);
     /* Importance weighs quadtree links only (hier_cluster.c cl_decide).
-     * At the defaults with --importance camera the elephant must be within
-     * 0.5% of the path tracer in every band, at least twice the path
-     * tracer's standard error (0.18 to 0.22% here; below 0.25%, checked).  Measured against a
-     * 1M-sample probe: -0.11, +0.06, +0.01% at --cluster-area 1e-3 (stop
-     * 26), +0.08, +0.15, +0.19% at its auto 3e-3 for surface averages
-     * (stop 33); when cluster links were weighted too, -0.94, -0.89,
-     * -0.99% (without importance -0.11%). */
+     * At the defaults with --importance camera the elephant's mean over
+     * seeds 1-4 must be within 0.5% of the path tracer in every band, at
+     * least twice the path tracer's standard error (0.18 to 0.22% here;
+     * below 0.25%, checked), and each seed within 1%.  One seed varies
+     * too much to judge 0.5%: against a 1M-sample probe, seeds 1-8 read
+     * -0.76 to +0.33% (stop 43, band by band; -0.53% against this test's
+     * probe at seed 7 once clusters drew samples for their new links
+     * only), and their mean -0.11%.  When cluster links were weighted
+     * too, the elephant read -0.94, -0.89, -0.99% (without importance
+     * -0.11%; stop 26), which the mean rejects. */
     const char *ki[] = {"importance", "camera", NULL};
-    solve_hier(&r, scene, RP_WANT_SURFACES, 0, ki);
-    e = (rp_estimate){.surface_radiance = h};
-    cr_assert_eq(r.type->estimate(r.state, &e, &err), RP_OK, "%s", err.message);
-    hrun_end(&r);
     size_t el = ns;
     for (size_t s = 0; s < ns; s++)
         if (strcmp(surf[s].name, "elephant") == 0)
             el = s;
     cr_assert_lt(el, ns);
+    double mean[8] = {0};
+    cr_assert_leq(nb, 8);
+    const uint64_t seed0 = hrun_seed;
+    for (int seed = 1; seed <= 4; seed++) {
+        hrun_seed = (uint64_t)seed;
+        solve_hier(&r, scene, RP_WANT_SURFACES, 0, ki);
+        e = (rp_estimate){.surface_radiance = h};
+        cr_assert_eq(r.type->estimate(r.state, &e, &err), RP_OK, "%s", err.message);
+        hrun_end(&r);
+        for (size_t b = 0; b < nb; b++) {
+            size_t i = el * nb + b;
+            cr_log_info("elephant band %zu, --importance camera, seed %d: %.6f, path tracer %.6f +- %.6f (%+.2f%%)", b,
+                        seed, h[i], pt[i], se[i], 100 * (h[i] - pt[i]) / pt[i]);
+            cr_expect_leq(fabs(h[i] - pt[i]), 0.01 * pt[i], "elephant band %zu with importance, seed %d: %.6f vs %.6f",
+                          b, seed, h[i], pt[i]);
+            mean[b] += h[i] / 4;
+        }
+    }
+    hrun_seed = seed0;
     for (size_t b = 0; b < nb; b++) {
         size_t i = el * nb + b;
-        cr_log_info("elephant band %zu, --importance camera: %.6f, path tracer %.6f +- %.6f (%+.2f%%)", b, h[i], pt[i],
-                    se[i], 100 * (h[i] - pt[i]) / pt[i]);
         cr_assert_lt(se[i], 0.0025 * pt[i], "the path tracer's error is too large to judge 0.5%%");
-        cr_expect_leq(fabs(h[i] - pt[i]), 0.005 * pt[i], "elephant band %zu with importance: %.6f vs %.6f +- %.6f", b,
-                      h[i], pt[i], se[i]);
+        cr_expect_leq(fabs(mean[b] - pt[i]), 0.005 * pt[i],
+                      "elephant band %zu with importance, mean of seeds 1-4: %.6f vs %.6f +- %.6f", b, mean[b], pt[i],
+                      se[i]);
     }
     free(h);
     free(pt);

@@ -220,7 +220,8 @@ typedef struct hier_clink {
     uint16_t count;     /* node receivers: how many entries (at most
                            --cluster-rays, 256); HIER_CL_NONE until the link
                            is evaluated (any receiver), then 0 for a
-                           cluster receiver */
+                           cluster receiver (1 while the pass that made it
+                           draws its entries, hier_cluster.c evaluate) */
     uint16_t Fb;        /* the oracle's form-factor bound (geometry only,
                            so judged once), rounded up to 8 bits of
                            mantissa (hier_bound_pack); 0 when not
