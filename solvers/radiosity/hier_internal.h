@@ -368,6 +368,7 @@ typedef struct hier_state {
                              it was drawn for (prune_entries; the entries of
                              a link a node receives need none) */
     size_t cap_cl_cvia;
+    size_t cl_follow_nn;  /* nodes when cl_cent last followed the splits */
     hier_nentry *cl_nent; /* entries of the links quadtree nodes receive, each
                              link's in its range (first, count), the ranges
                              in the order of the links in clinks */
@@ -525,6 +526,10 @@ rp_status hier_cluster_init(hier_state *s, rp_error *err);
 /* One refinement pass over the cluster links (the first one starts from
  * the root's self-link); face pairs become face-level links. */
 rp_status hier_cluster_refine(hier_state *s, size_t *refined, rp_error *err);
+/* Moves every entry of the clusters' pool whose source leaf has been split
+ * since it was drawn down to one of that leaf's descendants (hier_step,
+ * after a pass's refinement). */
+void hier_cluster_follow_splits(hier_state *s);
 /* Adds rho F B_src of every cluster-link entry to the receiving node's
  * gathered radiosity Bg (hier_sweep, between its gather and its push). */
 void hier_cluster_gather_nodes(hier_state *s, double *Bg);
@@ -785,5 +790,9 @@ int hier_grow(void **a, size_t *cap, size_t need, size_t size);
  * children weighted by the link's shares once they are known
  * (HIER_LINK_SHARES), else the source's own value (hierarchical.c). */
 void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, double *out);
+/* The shares of source node p's four children in what a receiver at qc
+ * (normal n) gathers from p: their point form factors from qc, summing to
+ * 1 (by area where all are 0); a link's shares (source_value). */
+void hier_child_shares(const hier_state *s, rp_vec3 qc, rp_vec3 n, const hier_node *p, double w[4]);
 
 #endif

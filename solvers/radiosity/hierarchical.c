@@ -730,6 +730,31 @@ void hier_source_mean(const hier_state *s, const hier_link *l, const double *X, 
     }
 }
 
+void hier_child_shares(const hier_state *s, rp_vec3 qc, rp_vec3 n, const hier_node *p, double w[4])
+{
+    const rp_vec3 np = s->faces[p->face].n;
+    const rp_vec3 dp = rp_v3_sub(hier_node_c(p), qc);
+    double ws = 0;
+    /* Only the ratios matter: far from the source (r^2 above 16 times
+     * its area, the near test of hier_link.c) the point-to-point
+     * kernel A_k cos cos / r^2 at the children's centroids gives them
+     * to about a percent (measured: the Cornell box's surface averages
+     * move by under 0.01%), nearer the contour integral. */
+    int far = rp_v3_dot(dp, dp) > HIER_NEAR_RATIO * hier_extent2(p);
+    for (int k = 0; k < 4; k++) {
+        const hier_node *c = &s->nodes[p->child + k];
+        if (far) {
+            rp_vec3 d = rp_v3_sub(hier_node_c(c), qc);
+            double r2 = rp_v3_dot(d, d);
+            w[k] = c->area * hier_max(rp_v3_dot(n, d), 0) * hier_max(-rp_v3_dot(np, d), 0) / (r2 * r2);
+        } else
+            w[k] = fabs(hier_point_polygon(qc, n, c->v, c->nverts));
+        ws += w[k];
+    }
+    for (int k = 0; k < 4; k++)
+        w[k] = ws > 0 ? w[k] / ws : s->nodes[p->child + k].area / p->area;
+}
+
 static void source_value(const hier_state *s, uint32_t qi, hier_link *l, const double *X, double *out)
 {
     const hier_node *p = &s->nodes[hier_link_src(l)];
@@ -737,28 +762,8 @@ static void source_value(const hier_state *s, uint32_t qi, hier_link *l, const d
      * shares would (hier_linear.c), and share[] holds the link's slot. */
     if (p->child != RP_NONE && !(l->flags & (HIER_LINK_SHARES | HIER_LINK_COEF)) && !s->linear) {
         const hier_node *q = &s->nodes[qi];
-        rp_vec3 n = s->faces[q->face].n, np = s->faces[p->face].n;
-        double w[4], ws = 0;
-        const rp_vec3 qc = hier_node_c(q);
-        rp_vec3 dp = rp_v3_sub(hier_node_c(p), qc);
-        /* Only the ratios matter: far from the source (r^2 above 16 times
-         * its area, the near test of hier_link.c) the point-to-point
-         * kernel A_k cos cos / r^2 at the children's centroids gives them
-         * to about a percent (measured: the Cornell box's surface averages
-         * move by under 0.01%), nearer the contour integral. */
-        int far = rp_v3_dot(dp, dp) > HIER_NEAR_RATIO * hier_extent2(p);
-        for (int k = 0; k < 4; k++) {
-            const hier_node *c = &s->nodes[p->child + k];
-            if (far) {
-                rp_vec3 d = rp_v3_sub(hier_node_c(c), qc);
-                double r2 = rp_v3_dot(d, d);
-                w[k] = c->area * hier_max(rp_v3_dot(n, d), 0) * hier_max(-rp_v3_dot(np, d), 0) / (r2 * r2);
-            } else
-                w[k] = fabs(hier_point_polygon(qc, n, c->v, c->nverts));
-            ws += w[k];
-        }
-        for (int k = 0; k < 4; k++)
-            w[k] = ws > 0 ? w[k] / ws : s->nodes[p->child + k].area / p->area;
+        double w[4];
+        hier_child_shares(s, hier_node_c(q), s->faces[q->face].n, p, w);
         hier_link_set_shares(l, w);
     }
     hier_source_mean(s, l, X, out);
@@ -1037,6 +1042,7 @@ static rp_status hier_step(void *state, rp_step_info *info, rp_error *err)
     if ((st = hier_refine(s, &refined, err)) != RP_OK)
         return st;
     refined += crefined;
+    hier_cluster_follow_splits(s);
     if (s->linear && (st = hier_linear_links(s, err)) != RP_OK)
         return st;
     if ((st = hier_open_update(s, err)) != RP_OK || (st = update_scale(s, err)) != RP_OK)
