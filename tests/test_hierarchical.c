@@ -2152,6 +2152,78 @@ Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout
     temp_ball_remove(&ball);
 }
 
+/* A cluster keeps its old links' entries when it gains links, and an
+ * entry points at the leaf its sample fell on, so that leaf may be split
+ * later; the entry must then move down to a leaf (hier_cluster.c,
+ * hier_cluster_follow_splits), or it would gather the children's mean.  A
+ * ball of 720 faces over a floor under a lamp, clustered and solved; then
+ * the leaf that holds the most entries is split by hand: its entries sit
+ * on a split leaf until they follow, and afterwards every live entry sits
+ * on a leaf, each of those on a child of the split one, with the form
+ * factors untouched. */
+Test(hier, cluster_entries_follow_split_leaves, .init = hsetup, .timeout = 120)
+{
+    temp_ball ball;
+    temp_ball_write(&ball, 24, 16);
+    char text[1024];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial lamp reflect 0 emit 5\nmaterial grey reflect 0.5\n"
+             "mesh ball grey %s scale 0.3 translate 0 0 0.5\n"
+             "quad floor grey -4 -4 0  4 -4 0  4 4 0  -4 4 0\n"
+             "quad lamp lamp -0.5 -0.5 2  -0.5 0.5 2  0.5 0.5 2  0.5 -0.5 2\n",
+             ball.path);
+    rp_scene *scene = rp_test_parse(text);
+    hrun r;
+    const char *kv[] = {"cluster", "on", NULL};
+    solve_hier(&r, scene, RP_WANT_SURFACES, 2, kv);
+    hier_state *s = r.state;
+    /* After the solve no live entry sits on a split leaf. */
+    size_t live = 0;
+    double Fsum = 0;
+    for (size_t j = 0; j < s->ncl_cent; j++)
+        if (s->cl_cent[j].F != 0) {
+            live++;
+            Fsum += s->cl_cent[j].F;
+            cr_assert_eq(s->nodes[s->cl_cent[j].src].child, RP_NONE, "entry %zu on split node %u", j,
+                         s->cl_cent[j].src);
+        }
+    cr_assert_gt(live, 1000, "%zu live entries: the test would prove little", live);
+    /* The leaf most entries point at. */
+    uint32_t *count = calloc(s->nnodes, sizeof *count);
+    cr_assert(count);
+    uint32_t best = 0;
+    for (size_t j = 0; j < s->ncl_cent; j++)
+        if (s->cl_cent[j].F != 0 && ++count[s->cl_cent[j].src] > count[best])
+            best = s->cl_cent[j].src;
+    const uint32_t n0 = count[best];
+    free(count);
+    cr_assert_geq(n0, 8, "the busiest leaf holds %u entries", n0);
+    rp_error err = {""};
+    cr_assert_eq(hier_subdivide(s, best, &err), RP_OK, "%s", err.message);
+    const uint32_t child = s->nodes[best].child;
+    cr_assert_neq(child, RP_NONE);
+    size_t on_split = 0;
+    for (size_t j = 0; j < s->ncl_cent; j++)
+        on_split += s->cl_cent[j].F != 0 && s->cl_cent[j].src == best;
+    cr_assert_eq(on_split, n0);
+    hier_cluster_follow_splits(s);
+    size_t moved = 0;
+    double Fafter = 0;
+    for (size_t j = 0; j < s->ncl_cent; j++) {
+        const hier_centry *e = &s->cl_cent[j];
+        if (e->F == 0)
+            continue;
+        Fafter += e->F;
+        cr_assert_eq(s->nodes[e->src].child, RP_NONE, "entry %zu still on split node %u", j, e->src);
+        moved += e->src >= child && e->src < child + 4;
+    }
+    cr_expect_eq(moved, n0, "%zu of the %u entries of the split leaf moved to its children", moved, n0);
+    cr_expect_eq(Fafter, Fsum, "form factors %.17g after, %.17g before", Fafter, Fsum);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+    temp_ball_remove(&ball);
+}
+
 /* A link is 14 bytes: the oracle's bound in 16 bits, the form factor in
  * 24 and three shares of 10 bits (or a 32-bit slot) in four bytes.  The
  * bound must stay a bound, at most 2^-7 above the value over the whole
