@@ -2152,6 +2152,20 @@ Test(hier, cluster_link_bound_and_transfer_closed_form, .init = hsetup, .timeout
     temp_ball_remove(&ball);
 }
 
+/* The ball of *ball (radius 0.3, reflectance 0.5) half a unit over a
+ * floor of side 8, under a square lamp (Le 5) of side 1 at height 2. */
+static rp_scene *ball_over_floor(const temp_ball *ball)
+{
+    char text[1024];
+    snprintf(text, sizeof text,
+             "bands grey\nmaterial lamp reflect 0 emit 5\nmaterial grey reflect 0.5\n"
+             "mesh ball grey %s scale 0.3 translate 0 0 0.5\n"
+             "quad floor grey -4 -4 0  4 -4 0  4 4 0  -4 4 0\n"
+             "quad lamp lamp -0.5 -0.5 2  -0.5 0.5 2  0.5 0.5 2  0.5 -0.5 2\n",
+             ball->path);
+    return rp_test_parse(text);
+}
+
 /* A cluster keeps its old links' entries when it gains links, and an
  * entry points at the leaf its sample fell on, so that leaf may be split
  * later; the entry must then move down to a leaf (hier_cluster.c,
@@ -2165,14 +2179,7 @@ Test(hier, cluster_entries_follow_split_leaves, .init = hsetup, .timeout = 120)
 {
     temp_ball ball;
     temp_ball_write(&ball, 24, 16);
-    char text[1024];
-    snprintf(text, sizeof text,
-             "bands grey\nmaterial lamp reflect 0 emit 5\nmaterial grey reflect 0.5\n"
-             "mesh ball grey %s scale 0.3 translate 0 0 0.5\n"
-             "quad floor grey -4 -4 0  4 -4 0  4 4 0  -4 4 0\n"
-             "quad lamp lamp -0.5 -0.5 2  -0.5 0.5 2  0.5 0.5 2  0.5 -0.5 2\n",
-             ball.path);
-    rp_scene *scene = rp_test_parse(text);
+    rp_scene *scene = ball_over_floor(&ball);
     hrun r;
     const char *kv[] = {"cluster", "on", NULL};
     solve_hier(&r, scene, RP_WANT_SURFACES, 2, kv);
@@ -2299,14 +2306,7 @@ Test(hier, link_offsets_cover_every_node, .init = hsetup, .timeout = 120)
 {
     temp_ball ball;
     temp_ball_write(&ball, 16, 10);
-    char text[1024];
-    snprintf(text, sizeof text,
-             "bands grey\nmaterial lamp reflect 0 emit 5\nmaterial grey reflect 0.5\n"
-             "mesh ball grey %s scale 0.3 translate 0 0 0.5\n"
-             "quad floor grey -4 -4 0  4 -4 0  4 4 0  -4 4 0\n"
-             "quad lamp lamp -0.5 -0.5 2  -0.5 0.5 2  0.5 0.5 2  0.5 -0.5 2\n",
-             ball.path);
-    rp_scene *scene = rp_test_parse(text);
+    rp_scene *scene = ball_over_floor(&ball);
     const char *eps[] = {"0.2", "0.05", "0.01"};
     size_t steps = 0, filled = 0;
     for (int e = 0; e < 3; e++) {
