@@ -61,9 +61,10 @@
  *     links, every face of a cluster that gained one link took new values
  *     for all of them, so each pass shook the radiosities the oracle
  *     judges by, and a few links crossing the threshold at each pass kept
- *     runs going: McGuire's teapot took 27 to 133 passes over 20 seeds,
- *     the bunny scene 35 to 58; this way 28 to 62 but one (215) and 37 to
- *     51, with a quarter fewer rays (stop 43, docs/design.md).  Candidate
+ *     runs going: McGuire's teapot took 27 to 133 passes over 40 seeds
+ *     (median 42), the bunny scene 35 to 58 over 20; this way 27 to 122
+ *     (median 33) and 38 to 52, with a quarter fewer rays (stop 43,
+ *     docs/design.md).  Candidate
  *     links are judged before anything is sampled for them: only the
  *     links the oracle keeps cost rays.
  *
@@ -989,7 +990,6 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     uint32_t *order = NULL;
     size_t capbyc = 0, cappdf = 0, capcdf = 0;
     uint32_t *nnew = NULL, *ktask = NULL; /* new links per cluster; samples per task */
-    double *nshare = NULL;                /* their share of the full mixture */
     size_t capk = 0;
     double rays = 0;
     /* New links received by clusters: their unoccluded estimates. */
@@ -1055,8 +1055,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
     lstart = calloc(s->ncl + 1, sizeof *lstart);
     fill = malloc((s->ncl ? s->ncl : 1) * sizeof *fill);
     nnew = calloc(s->ncl ? s->ncl : 1, sizeof *nnew);
-    nshare = calloc(s->ncl ? s->ncl : 1, sizeof *nshare);
-    if (!lstart || !fill || !nnew || !nshare)
+    if (!lstart || !fill || !nnew)
         goto nomem;
     size_t ncl_links = 0;
     for (size_t k = 0; k < nl; k++)
@@ -1104,7 +1103,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
                     byc[a + m++] = byc[a + i];
                 }
             nnew[c] = m;
-            nshare[c] = hier_min(1.0, share);
+            share = hier_min(1.0, share);
             if (m == 0)
                 continue;
             link_pdf(s, byc + a, m, pdf + a, cdf + a);
@@ -1119,7 +1118,7 @@ static rp_status evaluate(hier_state *s, hier_clink *links, size_t nl, unsigned 
                 toff[ntask] = slots;
                 unsigned K = face_samples(s, k, s->cl_faces[i], n);
                 if (m < n)
-                    K = (unsigned)hier_max(1.0, ceil(K * nshare[c]));
+                    K = (unsigned)hier_max(1.0, ceil(K * share));
                 if (!hier_grow((void **)&ktask, &capk, ntask + 1, sizeof *ktask))
                     goto nomem;
                 ktask[ntask] = K;
@@ -1189,7 +1188,6 @@ done:
     free(cdf);
     free(order);
     free(nnew);
-    free(nshare);
     free(ktask);
     return st;
 }
