@@ -74,6 +74,7 @@
 #include <gsl/gsl_fit.h>
 #include <gsl/gsl_integration.h>
 #include <gsl/gsl_linalg.h>
+#include <gsl/gsl_rng.h>
 #include <gsl/gsl_statistics.h>
 #include <math.h>
 #include <stdio.h>
@@ -1836,6 +1837,100 @@ Test(hier, mesh_occluder_unit_blocks_links_between_faces, .init = hsetup, .timeo
     }
     remove(path);
     rmdir(dir);
+}
+
+/* The shaft of a link (hier_link.c hier_outside_hull; Haines & Wallace
+ * 1994) is the convex hull of its two elements' boxes.  A box at a corner
+ * of the union box that no segment between the two reaches is outside it;
+ * one on the segment between their centres is not.  And over random boxes
+ * (some flat, as elements are), every box the test puts outside is missed
+ * by each of 1,024 segments between the two boxes (their corners and
+ * random points), checked by slab clipping here, independently: the test
+ * must never skip the rays of a segment an occluder may cut.  It must also
+ * skip some: a test that kept every box in the union would pass the first
+ * check alone. */
+static int segment_meets_box(const double p[3], const double q[3], const double lo[3], const double hi[3])
+{
+    double t0 = 0, t1 = 1;
+    for (int i = 0; i < 3; i++) {
+        double d = q[i] - p[i];
+        if (d == 0) {
+            if (p[i] < lo[i] || p[i] > hi[i])
+                return 0;
+            continue;
+        }
+        double a = (lo[i] - p[i]) / d, b = (hi[i] - p[i]) / d;
+        if (a > b) {
+            double t = a;
+            a = b;
+            b = t;
+        }
+        t0 = a > t0 ? a : t0;
+        t1 = b < t1 ? b : t1;
+        if (t0 > t1)
+            return 0;
+    }
+    return 1;
+}
+
+static void random_box(gsl_rng *g, double lo[3], double hi[3])
+{
+    int flat = (int)gsl_rng_uniform_int(g, 4) - 1; /* -1: solid, else that axis flat */
+    for (int i = 0; i < 3; i++) {
+        double c = 10 * gsl_rng_uniform(g), h = i == flat ? 0 : 2 * gsl_rng_uniform(g);
+        lo[i] = c - h;
+        hi[i] = c + h;
+    }
+}
+
+static rp_vec3 v3a(const double x[3]) { return rp_v3(x[0], x[1], x[2]); }
+
+Test(hier, shaft_hull_skips_only_boxes_no_segment_meets)
+{
+    const rp_vec3 a[2] = {rp_v3(0, 0, 0), rp_v3(1, 1, 1)}, b[2] = {rp_v3(4, 4, 0), rp_v3(5, 5, 1)};
+    const rp_vec3 corner[2] = {rp_v3(0, 4, 0), rp_v3(1, 5, 1)}, middle[2] = {rp_v3(2, 2, 0), rp_v3(3, 3, 1)};
+    /* The shaft's side there is the line y = x + 1 through (0, 1) and (4, 5);
+     * the box's nearest corner (1, 4), grown by e on each axis, is
+     * (1 + e, 4 - e): on the line at e = 1. */
+    cr_expect(hier_outside_hull(a, b, corner, 0), "the union box's corner is outside the shaft");
+    cr_expect(hier_outside_hull(a, b, corner, 0.9), "grown by 0.9 it is still outside");
+    cr_expect(!hier_outside_hull(a, b, corner, 1.1), "grown by 1.1 it reaches the shaft");
+    cr_expect(!hier_outside_hull(a, b, middle, 0), "a box on the centres' segment is inside");
+
+    gsl_rng *g = gsl_rng_alloc(gsl_rng_mt19937);
+    gsl_rng_set(g, 44);
+    int overlapping = 0, skipped = 0, wrong = 0;
+    for (int t = 0; t < 20000; t++) {
+        double alo[3], ahi[3], blo[3], bhi[3], olo[3], ohi[3];
+        random_box(g, alo, ahi);
+        random_box(g, blo, bhi);
+        random_box(g, olo, ohi);
+        int meets_union = 1;
+        for (int i = 0; i < 3; i++)
+            meets_union &= olo[i] <= fmax(ahi[i], bhi[i]) && ohi[i] >= fmin(alo[i], blo[i]);
+        if (!meets_union)
+            continue;
+        overlapping++;
+        const rp_vec3 A[2] = {v3a(alo), v3a(ahi)}, B[2] = {v3a(blo), v3a(bhi)}, O[2] = {v3a(olo), v3a(ohi)};
+        if (!hier_outside_hull(A, B, O, 0))
+            continue;
+        skipped++;
+        for (int k = 0; k < 1024 && !wrong; k++) {
+            double p[3], q[3];
+            for (int i = 0; i < 3; i++) {
+                /* the first 64: corner to corner */
+                double u = k < 64 ? (double)((k >> i) & 1) : gsl_rng_uniform(g);
+                double w = k < 64 ? (double)((k >> (i + 3)) & 1) : gsl_rng_uniform(g);
+                p[i] = alo[i] + u * (ahi[i] - alo[i]);
+                q[i] = blo[i] + w * (bhi[i] - blo[i]);
+            }
+            wrong += segment_meets_box(p, q, olo, ohi);
+        }
+    }
+    gsl_rng_free(g);
+    cr_log_info("shaft: %d of %d boxes in the union box skipped", skipped, overlapping);
+    cr_expect_eq(wrong, 0, "%d skipped boxes are met by a segment", wrong);
+    cr_expect_gt(skipped, overlapping / 10, "only %d of %d boxes in the union box skipped", skipped, overlapping);
 }
 
 /* A closed box in a lit room whose inside is a separate surface: an

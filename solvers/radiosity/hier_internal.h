@@ -480,6 +480,11 @@ size_t hier_bytes(const hier_state *s);
 double hier_point_to_node(const hier_state *s, rp_vec3 x, rp_vec3 n, const hier_node *p, double far_ratio);
 
 rp_status hier_cull_init(hier_state *s, rp_error *err);
+/* 1 if a side of the convex hull of boxes a and b (their shaft, Haines &
+ * Wallace 1994) other than a face of their union box has box o = (lo, hi),
+ * grown by eps, wholly outside: then no segment from a point of a to a
+ * point of b meets it.  The union box is the caller's test. */
+int hier_outside_hull(const rp_vec3 a[2], const rp_vec3 b[2], const rp_vec3 o[2], double eps);
 /* Links every pair of faces that can see each other. */
 rp_status hier_link_initial(hier_state *s, rp_error *err);
 /* One refinement pass with the current radiosities (Hanrahan et al. 1991,

@@ -18,8 +18,14 @@
  * between them are listed once (a face can only if its box meets the
  * pair's box, it reaches in front of both planes, and its own plane
  * separates corners of the pair: the walls of a convex room never block),
- * and a link tests only those, with the same box and plane tests on its
- * two elements.
+ * and a link tests only those, with the same plane tests on its two
+ * elements and the box test against their shaft, the convex hull of their
+ * two boxes (since stop 44; the union box before: 10.6% fewer rays on
+ * the bunny scene, 6.4% on the Cornell box, with the Cornell box's answers
+ * bit for bit the same and the bunny scene's within 1e-8: two links
+ * between opposite walls had one ray of 16 blocked, though neither the
+ * lamp nor the bunny's box meets their shaft, and are now fully visible;
+ * the hit was not traced further).
  *
  * BF refinement (sec. 5): a link whose error estimate
  *     rho_q * B_p * F_err   (the worst band)
@@ -232,7 +238,52 @@ rp_status hier_cull_init(hier_state *s, rp_error *err)
     return RP_OK;
 }
 
-/* 1 if some listed unit may block a segment between nodes q and p. */
+/* Coordinate i (0 x, 1 y, 2 z) of v. */
+static double vat(rp_vec3 v, int i) { return i == 0 ? v.x : (i == 1 ? v.y : v.z); }
+
+/* The convex hull of two boxes (Haines & Wallace 1994, "Shaft culling for
+ * efficient ray-cast radiosity") is their union box cut by one plane for
+ * each edge of it where one box bounds the union on one of the edge's two
+ * faces and the other box on the other: the plane holds the two boxes'
+ * matching edges (parallel to the third axis), so it cuts that corner of
+ * the union box off.  Only those planes are tested here; the callers have
+ * tested the union box. */
+int hier_outside_hull(const rp_vec3 a[2], const rp_vec3 b[2], const rp_vec3 o[2], double eps)
+{
+    for (int i = 0; i < 3; i++)
+        for (int j = i + 1; j < 3; j++)
+            for (int si = 0; si < 2; si++)
+                for (int sj = 0; sj < 2; sj++) {
+                    const double gi = si ? 1.0 : -1.0, gj = sj ? 1.0 : -1.0;
+                    const double ai = vat(a[si], i), bi = vat(b[si], i);
+                    const double aj = vat(a[sj], j), bj = vat(b[sj], j);
+                    /* a bounds the union on face (i, si) and b on (j, sj), or
+                     * the other way round */
+                    if (!((gi * ai > gi * bi && gj * bj > gj * aj) || (gi * bi > gi * ai && gj * aj > gj * bj)))
+                        continue;
+                    /* the line through (ai, aj) and (bi, bj) in the (i, j)
+                     * plane, its normal towards the union's corner c */
+                    double ni = aj - bj, nj = bi - ai;
+                    const double ci = gi > 0 ? hier_max(ai, bi) : hier_min(ai, bi);
+                    const double cj = gj > 0 ? hier_max(aj, bj) : hier_min(aj, bj);
+                    const double side = ni * (ci - ai) + nj * (cj - aj);
+                    if (side == 0)
+                        continue;
+                    if (side < 0) {
+                        ni = -ni;
+                        nj = -nj;
+                    }
+                    /* o's corner least far along n, pulled back by eps */
+                    const double m = ni * vat(o[ni > 0 ? 0 : 1], i) + nj * vat(o[nj > 0 ? 0 : 1], j);
+                    if (m - eps * (fabs(ni) + fabs(nj)) > ni * ai + nj * aj)
+                        return 1;
+                }
+    return 0;
+}
+
+/* 1 if some listed unit may block a segment between nodes q and p: its
+ * box meets the convex hull of the two elements' boxes (the shaft), and for
+ * a face, its plane separates corners of the two. */
 static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_node *p)
 {
     if (!s->cull)
@@ -244,32 +295,32 @@ static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_nod
     uint32_t cnt = s->pair_cnt[at];
     if (cnt == 0)
         return 0;
-    rp_vec3 lo = q->v[0], hi = q->v[0];
+    rp_vec3 qb[2] = {q->v[0], q->v[0]}, pb[2] = {p->v[0], p->v[0]};
     for (int i = 1; i < q->nverts; i++) {
-        lo = vmin(lo, q->v[i]);
-        hi = vmax(hi, q->v[i]);
+        qb[0] = vmin(qb[0], q->v[i]);
+        qb[1] = vmax(qb[1], q->v[i]);
     }
-    for (int i = 0; i < p->nverts; i++) {
-        lo = vmin(lo, p->v[i]);
-        hi = vmax(hi, p->v[i]);
+    for (int i = 1; i < p->nverts; i++) {
+        pb[0] = vmin(pb[0], p->v[i]);
+        pb[1] = vmax(pb[1], p->v[i]);
     }
+    const rp_vec3 lo = vmin(qb[0], pb[0]), hi = vmax(qb[1], pb[1]);
     const uint32_t *c = s->cand + s->pair_off[at];
     const double tol = s->faces[q->face].tol + s->faces[p->face].tol;
     for (uint32_t k = 0; k < cnt; k++) {
         uint32_t fk = s->unit_face[c[k]];
-        if (fk == RP_NONE) {
-            /* A mesh blocks when its box meets the two elements' box. */
-            if (box_overlap(s->unit_lo[c[k]], s->unit_hi[c[k]], lo, hi,
-                            tol + hier_box_tol(s->unit_lo[c[k]], s->unit_hi[c[k]])))
-                return 1;
+        const rp_vec3 ob[2] = {fk == RP_NONE ? s->unit_lo[c[k]] : s->faces[fk].lo,
+                               fk == RP_NONE ? s->unit_hi[c[k]] : s->faces[fk].hi};
+        const double eps = tol + (fk == RP_NONE ? hier_box_tol(ob[0], ob[1]) : s->faces[fk].tol);
+        if (!box_overlap(ob[0], ob[1], lo, hi, eps))
             continue;
-        }
-        if (!box_overlap(s->faces[fk].lo, s->faces[fk].hi, lo, hi, tol + s->faces[fk].tol))
+        /* A face with both elements on one side of its plane: the segments
+         * between them cannot cross it.  (A mesh may block with any box
+         * in the shaft.) */
+        if (fk != RP_NONE && (!(face_side(s, q, fk, 1) || face_side(s, p, fk, 1)) ||
+                              !(face_side(s, q, fk, -1) || face_side(s, p, fk, -1))))
             continue;
-        /* Both elements on one side of the candidate's plane: the segments
-         * between them cannot cross it. */
-        if (!(face_side(s, q, fk, 1) || face_side(s, p, fk, 1)) ||
-            !(face_side(s, q, fk, -1) || face_side(s, p, fk, -1)))
+        if (hier_outside_hull(qb, pb, ob, eps))
             continue;
         return 1;
     }
