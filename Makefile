@@ -120,7 +120,9 @@ $(BUILD)/bench/run/mpi.o: CPPFLAGS += $(MPI_CFLAGS)
 $(BUILD)/geometry/cgal/simplify.o $(FUZZ_BUILD)/geometry/cgal/simplify.o: CPPFLAGS += $(EIGEN_CFLAGS) -DCGAL_EIGEN3_ENABLED
 # GCC 12 takes Eigen 3.4's 4x4 matrix copy in CGAL's quadric property map for a
 # use of uninitialised memory (a known false positive of -Wmaybe-uninitialized).
-$(BUILD)/geometry/cgal/simplify.o: CXXFLAGS += -Wno-maybe-uninitialized
+# Its closest-point queries run on OpenMP threads (the fuzz build, without
+# -fopenmp, runs them serially).
+$(BUILD)/geometry/cgal/simplify.o: CXXFLAGS += -Wno-maybe-uninitialized -fopenmp
 $(BUILD)/bench/run/plugin.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"'
 $(BUILD)/bench/cli/main.o: CPPFLAGS += -DRP_VERSION='"$(VERSION)"' -DRP_GIT_DESCRIBE='"$(GIT_DESCRIBE)"'
 $(BUILD)/tests/%.o: CPPFLAGS += -DRP_SOURCE_DIR='"$(CURDIR)"' -DRP_BIN='"$(CURDIR)/$(BUILD)/radpt"' \

@@ -93,7 +93,7 @@ static int local_build(const rp_scene *scene, const rp_surface *sf, uint32_t *sl
     return 1;
 }
 
-rp_status rp_solution_create(const rp_scene *full, double ratio, double tolerance_rel, rp_solution **out,
+rp_status rp_solution_create(const rp_scene *full, double ratio, double tolerance_rel, int threads, rp_solution **out,
                              void (*log)(void *ctx, const char *message), void *log_ctx, rp_error *err)
 {
     *out = NULL;
@@ -117,7 +117,7 @@ rp_status rp_solution_create(const rp_scene *full, double ratio, double toleranc
     sol->full = full;
     for (size_t i = 0; i < nv; i++)
         slot[i] = RP_NONE;
-    const rp_simplify_params params = {.ratio = ratio > 0 ? ratio : 1, .tolerance = tol_rel * diag};
+    const rp_simplify_params params = {.ratio = ratio > 0 ? ratio : 1, .tolerance = tol_rel * diag, .threads = threads};
     for (size_t k = 0; k < ns; k++) {
         if (!dense_triangles(full, &surf[k]))
             continue;

@@ -63,10 +63,12 @@ typedef struct rp_solution rp_solution;
 /* ratio in (0, 1): keep that fraction of each dense surface's edges;
  * 0: auto (see above).  tolerance_rel > 0 overrides the auto tolerance
  * (a fraction of the scene's diagonal; with a ratio, both limits hold).
- * On success *out is the solution (rp_solution_scene is the scene itself,
- * copied, when no surface was simplified); messages (one per dense
- * surface: what it became, or why it was kept) go to log when non-NULL. */
-rp_status rp_solution_create(const rp_scene *full, double ratio, double tolerance_rel, rp_solution **out,
+ * threads: for the closest-point queries of the map back (0: OpenMP's
+ * default; the answers do not depend on it).  On success *out is the
+ * solution (rp_solution_scene is the scene itself, copied, when no surface
+ * was simplified); messages (one per dense surface: what it became, or why
+ * it was kept) go to log when non-NULL. */
+rp_status rp_solution_create(const rp_scene *full, double ratio, double tolerance_rel, int threads, rp_solution **out,
                              void (*log)(void *ctx, const char *message), void *log_ctx, rp_error *err);
 void rp_solution_destroy(rp_solution *sol);
 

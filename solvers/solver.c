@@ -377,7 +377,7 @@ rp_status rp_options_simplify(const rp_options *o, const rp_scene *scene, struct
         if (end == sm || *end || !(ratio > 0 && ratio < 1))
             return rp_error_set(err, RP_ERR_INPUT, "--simplify: '%s' is not off, auto or a fraction in (0, 1)", sm);
     }
-    rp_status st = rp_solution_create(scene, ratio, 0, out, o ? o->log : NULL, o ? o->log_ctx : NULL, err);
+    rp_status st = rp_solution_create(scene, ratio, 0, o ? o->threads : 0, out, o ? o->log : NULL, o ? o->log_ctx : NULL, err);
     if (st == RP_OK && rp_options_image_unwanted(o))
         rp_solution_drop_maps(*out);
     return st;

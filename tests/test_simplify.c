@@ -110,6 +110,29 @@ Test(simplify, sphere_to_a_tenth)
     rp_test_mesh_free(&m);
 }
 
+/* The map back's closest-point queries run on threads (since stop 44):
+ * one thread and three give the same triangles, weights and distances, bit
+ * for bit. */
+Test(simplify, map_back_same_for_any_thread_count)
+{
+    rp_test_mesh m = rp_test_uv_sphere(64, 40, 0, 40, 0);
+    rp_simplified s[2];
+    for (int k = 0; k < 2; k++) {
+        char msg[256] = "";
+        rp_simplify_params p = {.ratio = 0.1, .tolerance = 0, .threads = k == 0 ? 1 : 3};
+        cr_assert_eq(rp_cgal_simplify(m.xyz, m.nv, m.tri, m.nt, &p, &s[k], msg, sizeof msg), 0, "%s", msg);
+    }
+    cr_assert_eq(s[0].ntriangles, s[1].ntriangles);
+    cr_expect_eq(memcmp(s[0].vertex_tri, s[1].vertex_tri, m.nv * sizeof *s[0].vertex_tri), 0);
+    cr_expect_eq(memcmp(s[0].vertex_bary, s[1].vertex_bary, 3 * m.nv * sizeof *s[0].vertex_bary), 0);
+    cr_expect(s[0].max_distance_in == s[1].max_distance_in && s[0].max_distance_out == s[1].max_distance_out,
+              "distances %.17g %.17g against %.17g %.17g", s[0].max_distance_in, s[0].max_distance_out,
+              s[1].max_distance_in, s[1].max_distance_out);
+    rp_simplified_free(&s[0]);
+    rp_simplified_free(&s[1]);
+    rp_test_mesh_free(&m);
+}
+
 Test(simplify, flat_grid_keeps_its_outline)
 {
     const int n = 40;
@@ -315,7 +338,7 @@ Test(simplify, sphere_enclosure_closed_form, .timeout = 300)
     /* The solution mesh itself: the wall simplified, the lamp kept. */
     rp_solution *sol = NULL;
     rp_error err = {""};
-    cr_assert_eq(rp_solution_create(scene, 0.3, 0, &sol, NULL, NULL, &err), RP_OK, "%s", err.message);
+    cr_assert_eq(rp_solution_create(scene, 0.3, 0, 0, &sol, NULL, NULL, &err), RP_OK, "%s", err.message);
     const rp_scene *ss = rp_solution_scene(sol);
     cr_assert_eq(rp_solution_nsimplified(sol), 1);
     cr_assert_eq(rp_scene_nsurfaces(ss), 2);

@@ -9,6 +9,10 @@
  * distances and the map back. */
 #include "geometry/cgal/simplify.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
@@ -276,11 +280,20 @@ int simplify(const double *xyz, size_t nv, const uint32_t *tri, size_t nt, const
             out->tri[3 * f + k] = tout[f][k];
     out->border_edges = nborder;
 
-    /* Each input vertex's closest point on the simplified surface. */
+    /* Each input vertex's closest point on the simplified surface.  The
+     * trees are built (with the k-d tree that seeds distance queries)
+     * before the queries, which are then const and run in parallel, each
+     * writing its own vertex's slots (the largest distance is the same
+     * whatever the order). */
+#ifdef _OPENMP
+    const int threads = p->threads > 0 ? p->threads : omp_get_max_threads();
+#endif
     Tree coarse_tree(coarse.cbegin(), coarse.cend());
+    coarse_tree.build();
     coarse_tree.accelerate_distance_queries();
     double din = 0;
-    for (size_t i = 0; i < nv; i++) {
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1024) reduction(max : din)
+    for (long i = 0; i < static_cast<long>(nv); i++) {
         const Point &q = points[weld[i]];
         auto cp = coarse_tree.closest_point_and_primitive(q);
         const size_t f = static_cast<size_t>(cp.second - coarse.cbegin());
@@ -292,10 +305,12 @@ int simplify(const double *xyz, size_t nv, const uint32_t *tri, size_t nt, const
     }
     /* And each simplified vertex's distance to the input surface. */
     Tree input_tree(input.cbegin(), input.cend());
+    input_tree.build();
     input_tree.accelerate_distance_queries();
     double dout = 0;
-    for (const Point &q : vout)
-        dout = std::max(dout, std::sqrt(input_tree.squared_distance(q)));
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 256) reduction(max : dout)
+    for (long i = 0; i < static_cast<long>(vout.size()); i++)
+        dout = std::max(dout, std::sqrt(input_tree.squared_distance(vout[static_cast<size_t>(i)])));
     out->max_distance_in = din;
     out->max_distance_out = dout;
     return 0;

@@ -34,6 +34,9 @@ typedef struct rp_simplify_params {
      * over the area merged) exceeds tolerance^4; 0: no error limit.  In
      * scene units. */
     double tolerance;
+    /* OpenMP threads for the closest-point queries of the map back and the
+     * distances; 0: OpenMP's default. */
+    int threads;
 } rp_simplify_params;
 
 /* A simplified mesh and the map back, owned by the caller after a
