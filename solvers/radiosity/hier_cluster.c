@@ -108,12 +108,10 @@ static const hier_cluster *cl_of(const hier_state *s, uint32_t it) { return &s->
 static void item_box(const hier_state *s, uint32_t it, rp_vec3 *lo, rp_vec3 *hi)
 {
     if (is_node(it)) {
-        const hier_node *nd = &s->nodes[it];
-        *lo = *hi = nd->v[0];
-        for (int i = 1; i < nd->nverts; i++) {
-            *lo = rp_v3(hier_min(lo->x, nd->v[i].x), hier_min(lo->y, nd->v[i].y), hier_min(lo->z, nd->v[i].z));
-            *hi = rp_v3(hier_max(hi->x, nd->v[i].x), hier_max(hi->y, nd->v[i].y), hier_max(hi->z, nd->v[i].z));
-        }
+        rp_vec3 box[2];
+        hier_node_box(&s->nodes[it], box);
+        *lo = box[0];
+        *hi = box[1];
         return;
     }
     *lo = cl_of(s, it)->lo;

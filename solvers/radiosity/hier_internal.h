@@ -638,6 +638,16 @@ static inline double hier_box_tol(rp_vec3 lo, rp_vec3 hi)
     return 1e-9 * rp_v3_length(rp_v3_sub(hi, lo)) + 64 * DBL_EPSILON * m;
 }
 
+/* A node's bounding box, box[0] its low corner and box[1] its high one. */
+static inline void hier_node_box(const hier_node *nd, rp_vec3 box[2])
+{
+    box[0] = box[1] = nd->v[0];
+    for (int i = 1; i < nd->nverts; i++) {
+        box[0] = rp_v3(hier_min(box[0].x, nd->v[i].x), hier_min(box[0].y, nd->v[i].y), hier_min(box[0].z, nd->v[i].z));
+        box[1] = rp_v3(hier_max(box[1].x, nd->v[i].x), hier_max(box[1].y, nd->v[i].y), hier_max(box[1].z, nd->v[i].z));
+    }
+}
+
 /* A node's size for the near and far tests: its area, or a quarter of its
  * squared diameter when that is larger.  The two agree for squares, right
  * and equilateral triangles; for the slivers of a discontinuity mesh

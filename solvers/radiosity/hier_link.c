@@ -295,15 +295,9 @@ static int shaft_blocked(const hier_state *s, const hier_node *q, const hier_nod
     uint32_t cnt = s->pair_cnt[at];
     if (cnt == 0)
         return 0;
-    rp_vec3 qb[2] = {q->v[0], q->v[0]}, pb[2] = {p->v[0], p->v[0]};
-    for (int i = 1; i < q->nverts; i++) {
-        qb[0] = vmin(qb[0], q->v[i]);
-        qb[1] = vmax(qb[1], q->v[i]);
-    }
-    for (int i = 1; i < p->nverts; i++) {
-        pb[0] = vmin(pb[0], p->v[i]);
-        pb[1] = vmax(pb[1], p->v[i]);
-    }
+    rp_vec3 qb[2], pb[2];
+    hier_node_box(q, qb);
+    hier_node_box(p, pb);
     const rp_vec3 lo = vmin(qb[0], pb[0]), hi = vmax(qb[1], pb[1]);
     const uint32_t *c = s->cand + s->pair_off[at];
     const double tol = s->faces[q->face].tol + s->faces[p->face].tol;
