@@ -1391,6 +1391,10 @@ Test(hier, refuses_bad_options, .init = hsetup)
     cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, few, &err), RP_ERR_UNSUPPORTED);
     cr_assert(strstr(err.message, "6 faces"), "%s", err.message);
     hrun_end(&r);
+    const char *rule[] = {"ff-rule", "simpson", NULL};
+    cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, rule, &err), RP_ERR_INPUT);
+    cr_assert(strstr(err.message, "--ff-rule") && strstr(err.message, "simpson"), "%s", err.message);
+    hrun_end(&r);
     const char *mesh[] = {"mesh", "uniform", NULL};
     cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_IMAGE, 0, mesh, &err), RP_ERR_INPUT);
     cr_assert(strstr(err.message, "--mesh") && strstr(err.message, "uniform"), "%s", err.message);
@@ -1402,6 +1406,58 @@ Test(hier, refuses_bad_options, .init = hsetup)
                  err.message);
     hrun_end(&r);
     rp_scene_destroy(scene);
+}
+
+/* --ff-rule: the form factor one unrefined link integrates over its
+ * receiver, against Howell's closed forms, for unit squares at a right
+ * angle sharing an edge (C-14) and facing each other 1 and 6 apart (C-11;
+ * 1 apart is a near pair, 6 a far one, hier_link.c link_eval).  The
+ * midpoint rule's errors are those of the kernel at the centre or the
+ * quarters' centres (computed apart: -1.0%, +4.0%, +0.91%); the Gauss
+ * rule's, -0.73% at 1 apart where the kernel curves most, +0.18% where
+ * it is not smooth (the shared edge) and 2e-5 far.  The bounds sit
+ * between the two rules' errors, so the test fails if the option stops
+ * choosing the rule, and the default stays the midpoint rule. */
+Test(hier, ff_rule_against_closed_forms, .init = hsetup)
+{
+    static const char *const scenes[3] = {
+        "quad a m  0 0 0  0 0 1  1 0 1  1 0 0\nquad b m  0 0 0  0 1 0  0 1 1  0 0 1\n",
+        "quad a m  0 0 0  0 0 1  1 0 1  1 0 0\nquad b m  0 1 0  1 1 0  1 1 1  0 1 1\n",
+        "quad a m  0 0 0  0 0 1  1 0 1  1 0 0\nquad b m  0 6 0  1 6 0  1 6 1  0 6 1\n"};
+    const double exact[3] = {rp_cf_howell_perpendicular(1, 1, 1), rp_cf_howell_parallel(1, 1, 1),
+                             rp_cf_howell_parallel(1, 1, 6)};
+    /* |relative error| of the Gauss rule below gauss_max, the midpoint rule's above mid_min */
+    const double gauss_max[3] = {0.003, 0.008, 0.001}, mid_min[3] = {0.008, 0.03, 0.008};
+    const char *rules[3] = {NULL, "midpoint", "gauss"};
+    for (int c = 0; c < 3; c++)
+        for (int k = 0; k < 3; k++) {
+            char text[512];
+            snprintf(text, sizeof text,
+                     "bands grey\nmaterial m reflect 0.5 emit 1\n%scamera eye 0.5 0.5 3  look 0.5 0.5 0  up 0 1 0  "
+                     "fov 40  size 8 8\n",
+                     scenes[c]);
+            rp_scene *scene = rp_test_parse(text);
+            const char *kv[] = {"ff-rule", rules[k], NULL};
+            hrun r;
+            rp_error err = {""};
+            cr_assert_eq(hrun_start(&r, &rp_solver_hierarchical, scene, RP_WANT_SURFACES, 1, k ? kv : NULL, &err), RP_OK,
+                         "%s", err.message);
+            const hier_state *s = r.state;
+            hier_link e;
+            double rays = 0;
+            cr_assert_eq(hier_link_eval(s, 0, 1, &e, &rays), 1);
+            cr_assert_eq(rays, 0, "two squares alone cast no visibility rays");
+            const double rel = hier_link_F(&e) / exact[c] - 1;
+            cr_log_info("case %d, rule %s: F %.7f, closed form %.7f (%+.3f%%)", c, rules[k] ? rules[k] : "default",
+                        hier_link_F(&e), exact[c], 100 * rel);
+            if (k == 2)
+                cr_expect_lt(fabs(rel), gauss_max[c], "case %d: gauss %+.4f%%", c, 100 * rel);
+            else
+                cr_expect_gt(fabs(rel), mid_min[c], "case %d: %s %+.4f%%", c, rules[k] ? rules[k] : "default",
+                             100 * rel);
+            hrun_end(&r);
+            rp_scene_destroy(scene);
+        }
 }
 
 /* --cluster-area auto follows what the run is asked for (hierarchical.c

@@ -385,6 +385,10 @@ typedef struct hier_state {
     unsigned cluster_face_rays; /* samples per face of a receiving cluster */
     double cl_area_rel, cl_area; /* power-error area scale (relative, absolute) */
 
+    /* --ff-rule gauss: a link's form factor by hier_linear_rule_mean (the
+     * receiver's Gauss points) for every pair that does not straddle. */
+    int ff_gauss;
+
     /* --basis linear (hier_linear.c); all NULL / 0 with the constant basis.
      * B and Bg above keep the constant coefficients (the area means),
      * so surface averages, clusters, importance and the oracle read them
