@@ -198,6 +198,52 @@ static int find_d0(const rp_scene *scene, const frame2 *frames, double tol, seg_
     return 0;
 }
 
+/* ---- GAP outlines ------------------------------------------------------ */
+
+/* For each receiving face r that reflects (a black face needs no elements),
+ * every face o of another surface lying wholly in front of r (beyond tol)
+ * and no farther than RP_DISC_GAP_RATIO x sqrt(area of o), which also
+ * keeps o within a few degrees of parallel to r: o's edges projected along
+ * r's normal onto r's plane and clipped to r (discontinuity.h). */
+static int find_gap(const rp_scene *scene, const frame2 *frames, double tol, seg_list *out)
+{
+    const size_t nf = rp_scene_nfaces(scene);
+    const rp_face *F = rp_scene_faces(scene);
+    const rp_vec3 *V = rp_scene_vertices(scene);
+    const size_t nb = rp_scene_nbands(scene);
+    for (size_t r = 0; r < nf; r++) {
+        const frame2 *fr = &frames[r];
+        const rp_material *m = rp_scene_face_material(scene, (uint32_t)r);
+        int reflects = 0;
+        for (size_t k = 0; k < nb; k++)
+            reflects |= m->rho[k] > 0;
+        if (!reflects)
+            continue;
+        for (size_t o = 0; o < nf; o++) {
+            if (o == r || F[o].surface == F[r].surface)
+                continue;
+            const double reach = RP_DISC_GAP_RATIO * sqrt(F[o].area);
+            rp_vec3 p[4];
+            int near = 1;
+            for (uint32_t i = 0; i < F[o].nverts && near; i++) {
+                rp_vec3 v = V[F[o].v[i]];
+                double d = rp_v3_dot(fr->n, rp_v3_sub(v, fr->o));
+                near = d > tol && d <= reach;
+                p[i] = rp_v3_sub(v, rp_v3_scale(fr->n, d));
+            }
+            if (!near)
+                continue;
+            for (uint32_t i = 0; i < F[o].nverts; i++) {
+                rp_vec3 a, b;
+                if (clip_to_face(fr, p[i], p[(i + 1) % F[o].nverts], tol, &a, &b) &&
+                    seg_push(out, (uint32_t)r, RP_DISC_GAP, (uint32_t)o, a, b))
+                    return -1;
+            }
+        }
+    }
+    return 0;
+}
+
 /* ---- D1 ------------------------------------------------------------- */
 
 typedef struct edge_info {
@@ -638,7 +684,7 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
         return rp_error_set(err, RP_ERR_NOMEM, "discontinuity: out of memory");
     for (size_t f = 0; f < nf; f++)
         frame_make(scene, (uint32_t)f, &frames[f]);
-    if (!p.no_d0 && find_d0(scene, frames, tol, &l)) {
+    if (!p.no_d0 && (find_d0(scene, frames, tol, &l) || find_gap(scene, frames, tol, &l))) {
         free(frames);
         free(l.s);
         return rp_error_set(err, RP_ERR_NOMEM, "discontinuity: out of memory");
@@ -656,7 +702,8 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
         }
     }
     free(frames);
-    /* Per face: merge, then keep the D0 segments and the longest D1 ones. */
+    /* Per face: merge, then keep the D0 and GAP segments and the longest D1
+     * ones. */
     if (l.n) /* (l.s is NULL when nothing was found) */
         qsort(l.s, l.n, sizeof *l.s, by_face);
     size_t w = 0;
@@ -668,7 +715,7 @@ rp_status rp_disc_find(const rp_scene *scene, const rp_disc_params *params, rp_d
         qsort(l.s + i, n, sizeof *l.s, by_face);
         size_t d1 = 0;
         for (size_t k = i; k < i + n; k++) {
-            if (l.s[k].kind != RP_DISC_D0 && d1++ >= p.max_per_face)
+            if (l.s[k].kind != RP_DISC_D0 && l.s[k].kind != RP_DISC_GAP && d1++ >= p.max_per_face)
                 continue;
             l.s[w++] = l.s[k];
         }

@@ -5,8 +5,8 @@
  * sides of a triangle, edges shared by two faces of one surface), so the
  * mesh is conforming inside each surface: no T-vertices.  The
  * discontinuity mesh (RP_MESH_DISCONTINUITY, mesh_disc.c) cuts the faces
- * that reflect or emit into triangles whose edges follow contact lines and
- * shadow boundaries, and keeps the same sharing of a surface's edge
+ * that reflect or emit into triangles whose edges follow contact lines,
+ * the outlines of faces hovering just over them and shadow boundaries, and keeps the same sharing of a surface's edge
  * vertices.  Either way vertices are shared between the elements of a
  * surface and adjacency is recorded, so a solver can average element
  * values to vertices and interpolate (Gouraud). */
@@ -27,8 +27,9 @@ typedef struct rp_mesh rp_mesh;
 /* How faces are cut. */
 typedef enum rp_mesh_mode {
     RP_MESH_UNIFORM = 0,      /* regular grids of quads or triangles */
-    RP_MESH_DISCONTINUITY = 1 /* triangles conforming to contact lines (D0) and
-                                 the umbra/penumbra boundaries of area lights
+    RP_MESH_DISCONTINUITY = 1 /* triangles conforming to contact lines (D0),
+                                 near-contact outlines (GAP) and the
+                                 umbra/penumbra boundaries of area lights
                                  (D1): discontinuity.h, mesh_disc.c */
 } rp_mesh_mode;
 

@@ -888,6 +888,62 @@ Test(discontinuity, box_footprint_is_d0)
     rp_scene_destroy(s);
 }
 
+/* GAP outlines (discontinuity.h): a 2 x 2 plate facing down at height h
+ * over the floor at [1, 3] x [1, 3].  At h = 0.02 (0.01 of the root of its
+ * area, under RP_DISC_GAP_RATIO) its four edges projected onto the floor
+ * are GAP segments of the floor and nothing else is (the floor is behind
+ * the plate, the lamp too far); at h = 0.2 (0.1), and tilted 15 degrees
+ * with its low side at h = 0.02, there are none.  The mesh conforms to them. */
+Test(discontinuity, gap_outline_of_a_hovering_plate)
+{
+    static const char *const plates[3] = {"quad plate w  1 1 0.02  1 3 0.02  3 3 0.02  3 1 0.02\n",
+                                          "quad plate w  1 1 0.2  1 3 0.2  3 3 0.2  3 1 0.2\n",
+                                          "quad plate w  1 1 0.02  1 3 0.02  3 3 0.5559  3 1 0.5559\n"};
+    const rp_vec3 edge[4][2] = {{{1, 1, 0}, {1, 3, 0}}, {{1, 3, 0}, {3, 3, 0}},
+                                {{3, 3, 0}, {3, 1, 0}}, {{3, 1, 0}, {1, 1, 0}}};
+    for (int c = 0; c < 3; c++) {
+        char text[512];
+        snprintf(text, sizeof text,
+                 "material w reflect 0.5\nmaterial lamp reflect 0 emit 10\n"
+                 "quad floor w  -5 -5 0  5 -5 0  5 5 0  -5 5 0\n%s"
+                 "quad light lamp  -0.5 -0.5 4  -0.5 0.5 4  0.5 0.5 4  0.5 -0.5 4\n",
+                 plates[c]);
+        rp_scene *s = rp_test_parse(text);
+        rp_disc_segment *seg = NULL;
+        size_t n = 0;
+        rp_error err = {""};
+        cr_assert_eq(rp_disc_find(s, NULL, &seg, &n, &err), RP_OK, "%s", err.message);
+        const double tol = 1e-9 * rp_scene_diagonal(s);
+        int found[4] = {0};
+        size_t gap = 0;
+        for (size_t i = 0; i < n; i++) {
+            if (seg[i].kind != RP_DISC_GAP)
+                continue;
+            gap++;
+            cr_assert_eq(seg[i].face, 0, "case %d: a GAP segment on face %u", c, seg[i].face);
+            cr_assert_eq(seg[i].source, 1, "case %d: a GAP segment from face %u", c, seg[i].source);
+            for (int k = 0; k < 4; k++) {
+                double d1 = rp_v3_length(rp_v3_sub(seg[i].a, edge[k][0])) + rp_v3_length(rp_v3_sub(seg[i].b, edge[k][1]));
+                double d2 = rp_v3_length(rp_v3_sub(seg[i].a, edge[k][1])) + rp_v3_length(rp_v3_sub(seg[i].b, edge[k][0]));
+                found[k] += fmin(d1, d2) <= 2 * tol;
+            }
+        }
+        if (c == 0) {
+            cr_assert_eq(gap, 4, "%zu GAP segments", gap);
+            for (int k = 0; k < 4; k++)
+                cr_assert_eq(found[k], 1, "outline edge %d found %d times", k, found[k]);
+            rp_mesh *m = make_disc_mesh(s, 500);
+            check_disc_areas(s, m);
+            check_elements(m);
+            check_no_straddle(s, m, seg, n);
+            rp_mesh_destroy(m);
+        } else
+            cr_assert_eq(gap, 0, "case %d: %zu GAP segments", c, gap);
+        free(seg);
+        rp_scene_destroy(s);
+    }
+}
+
 Test(discontinuity, cornell_box)
 {
     rp_scene *s = rp_test_load("scenes/cornell.scene");

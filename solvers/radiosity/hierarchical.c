@@ -123,10 +123,11 @@ static const rp_option_spec hier_options[] = {
     RP_SIMPLIFY_OPTION("auto"),
     {"mesh", "faces|discontinuity",
      "the quadtrees' roots: the faces as given, or the faces cut into triangles whose edges follow "
-     "contact lines (D0) and the umbra/penumbra boundaries of area lights (D1), so that no element "
+     "contact lines (D0), the outlines of faces hovering just over a face (GAP: a lamp 1 cm below a "
+     "ceiling) and the umbra/penumbra boundaries of area lights (D1), so that no element "
      "straddles them (the --mesh discontinuity of the uniform solvers, with no points inside a face)",
      "faces"},
-    {"mesh-segments", "N", "--mesh discontinuity: D1 segments kept per face, the longest first (D0 all kept)",
+    {"mesh-segments", "N", "--mesh discontinuity: D1 segments kept per face, the longest first (D0 and GAP all kept)",
      HIER_STR(RP_DISC_DEFAULT_MAX_PER_FACE)},
     {"importance", "camera|surfaces|none|auto",
      "weigh the refinement by importance (Smits, Arvo & Salesin 1992): camera: what the image sees, "

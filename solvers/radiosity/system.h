@@ -127,12 +127,13 @@ typedef struct rp_rad_system {
 #define RP_RAD_MESH_MODE_OPTIONS                                                             \
     {"mesh", "uniform|discontinuity",                                                        \
      "uniform: a regular grid per face; discontinuity: triangles (CGAL constrained Delaunay) " \
-     "whose edges follow contact lines (D0) and the umbra/penumbra boundaries of area lights " \
+     "whose edges follow contact lines (D0), the outlines of faces hovering just over a face " \
+     "(GAP: a lamp 1 cm below a ceiling) and the umbra/penumbra boundaries of area lights "   \
      "(D1: EV and VE wedges of silhouette edges, kept where a sampled visibility test finds " \
      "them real; Heckbert 1992, Lischinski et al. 1992), about as many elements as asked",   \
      "uniform"},                                                                             \
     {"mesh-segments", "N",                                                                   \
-     "discontinuity mesh: D1 segments kept per face, the longest first (D0 all kept)",       \
+     "discontinuity mesh: D1 segments kept per face, the longest first (D0 and GAP all kept)", \
      RP_RAD_STR(RP_DISC_DEFAULT_MAX_PER_FACE)},                                \
     RP_SIMPLIFY_OPTION("off")
 
