@@ -839,6 +839,14 @@ Test(discontinuity, mesh_follows_shadow_boundaries)
     rp_scene_destroy(s);
 }
 
+/* 1 if segment s runs from p to q, either way round, within tol at each end. */
+static int seg_is(const rp_disc_segment *s, rp_vec3 p, rp_vec3 q, double tol)
+{
+    double d1 = rp_v3_length(rp_v3_sub(s->a, p)) + rp_v3_length(rp_v3_sub(s->b, q));
+    double d2 = rp_v3_length(rp_v3_sub(s->a, q)) + rp_v3_length(rp_v3_sub(s->b, p));
+    return fmin(d1, d2) <= 2 * tol;
+}
+
 /* A 1 x 1 x 1 box standing on the floor at [1, 2] x [1, 2]: its four sides
  * touch the floor along the footprint's four edges (D0); its bottom is
  * coplanar with the floor and adds nothing. */
@@ -866,12 +874,8 @@ Test(discontinuity, box_footprint_is_d0)
             continue;
         cr_assert_eq(seg[i].face, 0, "D0 on face %u: only the floor has contacts inside it", seg[i].face);
         d0++;
-        for (int k = 0; k < 4; k++) {
-            double d1 = rp_v3_length(rp_v3_sub(seg[i].a, foot[k][0])) + rp_v3_length(rp_v3_sub(seg[i].b, foot[k][1]));
-            double d2 = rp_v3_length(rp_v3_sub(seg[i].a, foot[k][1])) + rp_v3_length(rp_v3_sub(seg[i].b, foot[k][0]));
-            if (fmin(d1, d2) <= 2 * tol)
-                found[k]++;
-        }
+        for (int k = 0; k < 4; k++)
+            found[k] += seg_is(&seg[i], foot[k][0], foot[k][1], tol);
     }
     cr_assert_eq(d0, 4, "%zu D0 segments", d0);
     for (int k = 0; k < 4; k++)
@@ -922,11 +926,8 @@ Test(discontinuity, gap_outline_of_a_hovering_plate)
             gap++;
             cr_assert_eq(seg[i].face, 0, "case %d: a GAP segment on face %u", c, seg[i].face);
             cr_assert_eq(seg[i].source, 1, "case %d: a GAP segment from face %u", c, seg[i].source);
-            for (int k = 0; k < 4; k++) {
-                double d1 = rp_v3_length(rp_v3_sub(seg[i].a, edge[k][0])) + rp_v3_length(rp_v3_sub(seg[i].b, edge[k][1]));
-                double d2 = rp_v3_length(rp_v3_sub(seg[i].a, edge[k][1])) + rp_v3_length(rp_v3_sub(seg[i].b, edge[k][0]));
-                found[k] += fmin(d1, d2) <= 2 * tol;
-            }
+            for (int k = 0; k < 4; k++)
+                found[k] += seg_is(&seg[i], edge[k][0], edge[k][1], tol);
         }
         if (c == 0) {
             cr_assert_eq(gap, 4, "%zu GAP segments", gap);
