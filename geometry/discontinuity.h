@@ -56,8 +56,8 @@ extern "C" {
 #define RP_DISC_DEFAULT_MAX_PER_FACE 48
 /* GAP outlines: a face at most this fraction of the square root of its
  * area from the receiving face (McGuire's Cornell boxes: their lamps 1 cm
- * below the ceiling, 0.021 of the lamp's; 0.05 leaves the stability
- * study's and the tests' occluders, a third of their size away, out). */
+ * below the ceiling, 0.021 of the lamp's; the shadow tests' occluders, a
+ * third of their size away, stay out). */
 #define RP_DISC_GAP_RATIO 0.05
 
 typedef enum rp_disc_kind {

@@ -6,10 +6,11 @@
  * mesh is conforming inside each surface: no T-vertices.  The
  * discontinuity mesh (RP_MESH_DISCONTINUITY, mesh_disc.c) cuts the faces
  * that reflect or emit into triangles whose edges follow contact lines,
- * the outlines of faces hovering just over them and shadow boundaries, and keeps the same sharing of a surface's edge
- * vertices.  Either way vertices are shared between the elements of a
- * surface and adjacency is recorded, so a solver can average element
- * values to vertices and interpolate (Gouraud). */
+ * the outlines of faces hovering just over them and shadow boundaries,
+ * and keeps the same sharing of a surface's edge vertices.  Either way
+ * vertices are shared between the elements of a surface and adjacency is
+ * recorded, so a solver can average element values to vertices and
+ * interpolate (Gouraud). */
 #ifndef RP_MESH_H
 #define RP_MESH_H
 
