@@ -142,6 +142,18 @@ static int clip_to_face(const frame2 *fr, rp_vec3 a, rp_vec3 b, double tol, rp_v
     return 1;
 }
 
+/* 1 if face f reflects in some band (a receiver: a black face needs no
+ * elements). */
+static int face_reflects(const rp_scene *scene, uint32_t f)
+{
+    const rp_material *m = rp_scene_face_material(scene, f);
+    const size_t nb = rp_scene_nbands(scene);
+    for (size_t k = 0; k < nb; k++)
+        if (m->rho[k] > 0)
+            return 1;
+    return 0;
+}
+
 /* ---- D0 ------------------------------------------------------------- */
 
 static int find_d0(const rp_scene *scene, const frame2 *frames, double tol, seg_list *out)
@@ -200,24 +212,19 @@ static int find_d0(const rp_scene *scene, const frame2 *frames, double tol, seg_
 
 /* ---- GAP outlines ------------------------------------------------------ */
 
-/* For each receiving face r that reflects (a black face needs no elements),
- * every face o of another surface lying wholly in front of r (beyond tol)
- * and no farther than RP_DISC_GAP_RATIO x sqrt(area of o), which also
- * keeps o within a few degrees of parallel to r: o's edges projected along
- * r's normal onto r's plane and clipped to r (discontinuity.h). */
+/* For each receiving face r that reflects (face_reflects), every face o of
+ * another surface lying wholly in front of r (beyond tol) and no farther
+ * than RP_DISC_GAP_RATIO x sqrt(area of o), which also keeps o within a
+ * few degrees of parallel to r: o's edges projected along r's normal onto
+ * r's plane and clipped to r (discontinuity.h). */
 static int find_gap(const rp_scene *scene, const frame2 *frames, double tol, seg_list *out)
 {
     const size_t nf = rp_scene_nfaces(scene);
     const rp_face *F = rp_scene_faces(scene);
     const rp_vec3 *V = rp_scene_vertices(scene);
-    const size_t nb = rp_scene_nbands(scene);
     for (size_t r = 0; r < nf; r++) {
         const frame2 *fr = &frames[r];
-        const rp_material *m = rp_scene_face_material(scene, (uint32_t)r);
-        int reflects = 0;
-        for (size_t k = 0; k < nb; k++)
-            reflects |= m->rho[k] > 0;
-        if (!reflects)
+        if (!face_reflects(scene, (uint32_t)r))
             continue;
         for (size_t o = 0; o < nf; o++) {
             if (o == r || F[o].surface == F[r].surface)
@@ -432,12 +439,8 @@ static int find_d1(const rp_scene *scene, const frame2 *frames, double tol, doub
     if (!keys || !edges || !recv)
         goto done;
     /* Receivers: faces that reflect in some band. */
-    const size_t nb = rp_scene_nbands(scene);
-    for (size_t f = 0; f < nf; f++) {
-        const rp_material *m = rp_scene_face_material(scene, (uint32_t)f);
-        for (size_t k = 0; k < nb; k++)
-            recv[f] |= m->rho[k] > 0;
-    }
+    for (size_t f = 0; f < nf; f++)
+        recv[f] = (unsigned char)face_reflects(scene, (uint32_t)f);
     /* Weld vertices closer than tol, across surfaces (the Cornell box's
      * blocks are five quads each, with their own vertices): edges and
      * corners are found by position. */
