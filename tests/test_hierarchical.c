@@ -721,12 +721,14 @@ Test(hier, linear_basis_on_triangles_against_closed_form, .init = hsetup)
  * form factor (Howell's B-3; the tile's 1e-3 sides shade the plate by
  * well under 0.1%), and the value of a half-enclosed leaf must be the mean
  * of B over its open half (8 x 8-point Gauss-Legendre, GSL).  Its
- * visibility is sampled (16 rays, half of them blocked), so the test
+ * visibility is sampled (64 rays from an emitter since stop 46, 16
+ * before; half of them blocked), so the test
  * takes the mean signed error over the 8 half-enclosed leaves and holds it
  * within 3 standard errors (from their spread) plus 0.5%, the open
- * leaves' own error (measured: mean -0.8%, spread 2.0%, open leaves
- * 0.54%).  Without it (--open-fraction off) a half-enclosed leaf shows the
- * mean over its whole area, half of that (measured: 50% low).  The plate's
+ * leaves' own error (measured: mean +0.9%, spread 1.4%, open leaves
+ * 0.55%; before stop 46, when the lamp was split for them, -0.8%, 2.0%).
+ * Without it (--open-fraction off) a half-enclosed leaf shows the mean
+ * over its whole area, half of that (measured: 50% low).  The plate's
  * surface average counts the enclosed part as dark either way.  The
  * Gouraud vertex where an open and a half-enclosed column meet is a point
  * value in the open, within 0.5% of the closed form (measured: 0.01%; 25%
@@ -784,6 +786,107 @@ static void tile_errors(const char *open, const char *basis, double *worst_open,
     rp_scene_destroy(scene);
 }
 
+/* The radiosity of the penumbra plate below (x, y on the unit plate):
+ * rho pi Le F to the part of the lamp [0.4, 0.6]^2 at height 4 that the
+ * shield leaves visible, lx < 1 - x (Howell's B-3 by superposition; the
+ * corner form is odd in its sides, so the point may lie outside). */
+static double penumbra_B(double x, double y)
+{
+    const double rho = 0.5, Le = 3, c = 4, l0 = 0.4, l1 = 0.6;
+    const double hi = fmin(l1, 1 - x);
+    if (hi <= l0)
+        return 0;
+    return rho * RP_PI * Le * rp_cf_point_rect(x - l0, y - l0, hi - l0, l1 - l0, c);
+}
+
+/* penumbra_B's mean over [x0, x1] x [y0, y1], by 8 x 8-point
+ * Gauss-Legendre (GSL) on each piece between its kinks at x = 0.4, 0.6. */
+static double penumbra_mean(double x0, double x1, double y0, double y1)
+{
+    gsl_integration_glfixed_table *t = gsl_integration_glfixed_table_alloc(8);
+    cr_assert(t);
+    const double cuts[] = {x0, fmin(fmax(0.4, x0), x1), fmin(fmax(0.6, x0), x1), x1};
+    double sum = 0;
+    for (int k = 0; k < 3; k++)
+        for (size_t i = 0; cuts[k + 1] > cuts[k] && i < t->n; i++)
+            for (size_t j = 0; j < t->n; j++) {
+                double x, wx, y, wy;
+                gsl_integration_glfixed_point(cuts[k], cuts[k + 1], i, &x, &wx, t);
+                gsl_integration_glfixed_point(y0, y1, j, &y, &wy, t);
+                sum += wx * wy * penumbra_B(x, y);
+            }
+    gsl_integration_glfixed_table_free(t);
+    return sum / ((x1 - x0) * (y1 - y0));
+}
+
+/* A far emitter seen in part (issue 16's square light over an occluder's
+ * edge): the lamp 0.2 x 0.2 (Le 3) at height 4 over the unit plate (rho
+ * 1/2), a black shield at height 2 over x >= 0.5.  The segment from plate
+ * point (x, y) to lamp point (lx, ly) crosses z = 2 at (x + lx) / 2, so the
+ * plate sees the lamp's part lx < 1 - x: umbra beyond x = 0.6, penumbra
+ * from 0.4, and one bounce is the whole answer (penumbra_B).  Refined to
+ * 16 x 16 leaves (bf-epsilon 0), the lamp, 20 of its sizes away, must stay
+ * one element (hier_link.c decide: a partly visible emitter is split only
+ * where the kernel varies across it; before stop 46 it went down to
+ * --min-area with the leaves), so the penumbra leaves' values come from
+ * their links' own rays: their mean signed error against the leaf means
+ * must be within 3 standard errors (from their spread) plus 0.5%, their
+ * sum within 0.5%, every other leaf within 0.5%, and the plate's average
+ * within 0.5% (measured: -0.13%, spread 19%; the sum +0.11%; the others
+ * 0.01%; the average +0.03%.  With the lamp split, 21 nodes: spread 6.7%,
+ * the sum -0.09%, the average -0.02%: a penumbra leaf is noisier alone,
+ * the light it receives in all is not). */
+Test(hier, far_emitter_penumbra_against_closed_form, .init = hsetup)
+{
+    rp_scene *scene = rp_test_parse("bands grey\nmaterial floor reflect 0.5\nmaterial lamp reflect 0 emit 3\n"
+                                    "material black reflect 0\n"
+                                    "quad receiver floor  0 0 0  1 0 0  1 1 0  0 1 0\n"
+                                    "quad shield black  0.5 -1 2  0.5 2 2  2 2 2  2 -1 2\n"
+                                    "quad emitter lamp  0.4 0.4 4  0.4 0.6 4  0.6 0.6 4  0.6 0.4 4\n");
+    hrun r;
+    const char *kv[] = {"bf-epsilon", "0", "min-area", "0.001", NULL};
+    solve_hier(&r, scene, RP_WANT_SURFACES, 0, kv);
+    const hier_state *s = r.state;
+    size_t lamp_nodes = 0;
+    for (size_t i = 0; i < s->nnodes; i++)
+        lamp_nodes += s->nodes[i].face == 2;
+    cr_expect_eq(lamp_nodes, 1, "the far lamp was split into %zu nodes", lamp_nodes);
+    const int n = 16;
+    double pen[4 * 16], worst = 0, total = 0, pen_got = 0, pen_want = 0;
+    int np = 0;
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+            const double x0 = (double)i / n, x1 = (double)(i + 1) / n, y0 = (double)j / n, y1 = (double)(j + 1) / n;
+            const double m = penumbra_mean(x0, x1, y0, y1);
+            total += m / (n * n);
+            double got;
+            rp_hierarchical_radiosity_at(s, 0, rp_v3(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0), &got);
+            if (x1 > 0.4 && x0 < 0.6) {
+                pen[np++] = got / m - 1;
+                pen_got += got;
+                pen_want += m;
+            } else
+                worst = fmax(worst, m > 0 ? fabs(got / m - 1) : fabs(got));
+        }
+    cr_assert_eq(np, 4 * n);
+    const double mean = gsl_stats_mean(pen, 1, (size_t)np), sd = gsl_stats_sd(pen, 1, (size_t)np);
+    double L;
+    rp_estimate est = {.surface_radiance = &L};
+    rp_error err = {""};
+    cr_assert_eq(r.type->estimate(r.state, &est, &err), RP_OK, "%s", err.message);
+    const double avg = L / (total / RP_PI) - 1; /* the plate's area is 1 */
+    cr_log_info("far lamp: penumbra leaves %+.4f (spread %.4f), their sum %+.4f; other leaves %.4f at worst; "
+                "plate average %+.4f",
+                mean, sd, pen_got / pen_want - 1, worst, avg);
+    cr_expect(fabs(mean) < 3 * sd / sqrt((double)np) + 0.005,
+              "penumbra leaves %+.4f off their means (3 standard errors %.4f)", mean, 3 * sd / sqrt((double)np));
+    cr_expect(fabs(pen_got / pen_want - 1) < 0.005, "penumbra leaves' sum %+.4f off", pen_got / pen_want - 1);
+    cr_expect(worst < 0.005, "lit and umbra leaves %.4f off", worst);
+    cr_expect(fabs(avg) < 0.005, "plate average %+.4f off", avg);
+    hrun_end(&r);
+    rp_scene_destroy(scene);
+}
+
 /* The tile's checks for one basis: with --open-fraction the half-enclosed
  * leaves within 3 standard errors (from their spread) plus 0.5% of their
  * open part's mean, the open leaves within 1%, the plate's average and
@@ -798,11 +901,25 @@ static void expect_tile(const char *basis, double avg_bound, double vertex_bound
               mean, 3 * sd / sqrt(8.0));
     cr_expect(sd < 0.05, "--basis %s: half-enclosed leaves spread %.4f", basis, sd);
     cr_expect(wo < 0.01, "--basis %s: open leaves %.4f off", basis, wo);
-    cr_expect(avg < avg_bound, "--basis %s: plate average %.4f off", basis, avg);
     cr_expect(vx < vertex_bound, "--basis %s: Gouraud vertex %.4f off", basis, vx);
     tile_errors("off", basis, &wo, &mean, &sd, &avg, &vx);
     cr_expect(mean < -0.4, "--basis %s --open-fraction off: half-enclosed leaves only %+.4f off", basis, mean);
-    cr_expect(avg < avg_bound, "--basis %s --open-fraction off: plate average %.4f off", basis, avg);
+    /* The plate's average carries the noise of the half-enclosed leaves'
+     * rays (the constant basis, seeds 7 to 15: -0.1 to +0.7%, and -0.0
+     * to +0.8% when the lamp was split for them, before stop 46), so it is judged
+     * by its mean over four seeds, with and without the open fractions. */
+    const uint64_t seed0 = hrun_seed;
+    for (int off = 0; off < 2; off++) {
+        double avg_mean = 0;
+        for (uint64_t k = 0; k < 4; k++) {
+            hrun_seed = seed0 + k;
+            tile_errors(off ? "off" : "on", basis, &wo, &mean, &sd, &avg, &vx);
+            avg_mean += avg / 4;
+        }
+        cr_expect(avg_mean < avg_bound, "--basis %s --open-fraction %s: plate average %.4f off (mean of four seeds)",
+                  basis, off ? "off" : "on", avg_mean);
+    }
+    hrun_seed = seed0;
 }
 
 Test(hier, open_fraction_of_a_plate_under_a_tile_against_closed_form, .init = hsetup)

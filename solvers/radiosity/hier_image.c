@@ -263,7 +263,12 @@ static double point_visibility(const hier_state *s, rp_vec3 x, rp_vec3 n, const 
                                uint64_t key, double *rays)
 {
     const rp_vec3 np = s->faces[p->face].n;
-    const unsigned m = (unsigned)floor(sqrt((double)s->vertex_rays) + 0.5), N = m * m;
+    /* An emitter is not split for its shadows (hier_link.c decide): one
+     * source stands for the pieces a reflector would be split into, so it
+     * gets as many rays as a link (--vis-rays) where --vertex-rays is
+     * fewer. */
+    const unsigned nr = s->faces[p->face].reflects || s->vertex_rays > s->vis_rays ? s->vertex_rays : s->vis_rays;
+    const unsigned m = (unsigned)floor(sqrt((double)nr) + 0.5), N = m * m;
     double wsum = 0, wopen = 0;
     unsigned valid = 0;
     for (unsigned k = 0; k < 8 * N && valid < N; k++) {

@@ -390,15 +390,15 @@ static int link_rays_prepare(link_rays *r, const hier_node *q, const hier_node *
  * weighted by its kernel cos cos / r^2 (where the visible part of p is the
  * nearer one, or the one seen more squarely, a plain fraction of open rays
  * would understate the energy it passes); 0 when no pair can carry light. */
-static double link_rays_cast(const hier_state *s, const link_rays *r, uint64_t key, unsigned *open,
+static double link_rays_cast(const hier_state *s, const link_rays *r, unsigned n, uint64_t key, unsigned *open,
                              unsigned *valid, double *rays)
 {
-    unsigned m = (unsigned)floor(sqrt((double)s->vis_rays) + 0.5), N = m * m;
-    uint32_t perm[64];
+    unsigned m = (unsigned)floor(sqrt((double)n) + 0.5), N = m * m;
+    uint32_t perm[HIER_MAX_VIS_RAYS];
     hier_shuffle(perm, N, key, 4 * (uint64_t)N);
-    double wsum = 0, wopen = 0, w[64];
-    rp_vec3 a[64], b[64];
-    unsigned char blocked[64];
+    double wsum = 0, wopen = 0, w[HIER_MAX_VIS_RAYS];
+    rp_vec3 a[HIER_MAX_VIS_RAYS], b[HIER_MAX_VIS_RAYS];
+    unsigned char blocked[HIER_MAX_VIS_RAYS];
     *valid = *open = 0;
     for (unsigned k = 0; k < N; k++) {
         double u1 = ((k % m) + hier_u01(key, 4 * (uint64_t)k)) / m;
@@ -433,11 +433,19 @@ static double link_rays_cast(const hier_state *s, const link_rays *r, uint64_t k
 /* The visible fraction from the second, independent set of rays of the
  * link q <- p prepared in *set: the value's (see link_eval). */
 static double value_rays(const hier_state *s, const link_rays *set, const hier_node *q, const hier_node *p,
-                         double *rays)
+                         unsigned flags, double *rays)
 {
+    /* A partly visible emitter is not split (decide): its one link
+     * measures with four times the rays what four children would (at most
+     * 64).  With the rays of one child, the short box's front on the
+     * Cornell box varied by 0.45% from seed to seed, 0.16% with these,
+     * 0.11% when the emitter was split (green, seeds 1-8). */
+    unsigned n = s->vis_rays;
+    if ((flags & HIER_LINK_PARTIAL) && !s->faces[p->face].reflects)
+        n = 4 * n < HIER_MAX_VIS_RAYS ? 4 * n : HIER_MAX_VIS_RAYS;
     unsigned open = 0, valid = 0;
     const uint64_t key = hier_key(s->seed ^ HIER_VALUE_KEY, hier_node_id(s, q), hier_node_id(s, p));
-    return link_rays_cast(s, set, key, &open, &valid, rays);
+    return link_rays_cast(s, set, n, key, &open, &valid, rays);
 }
 
 /* Completes a link qi <- its source link_eval left pending, whose unoccluded
@@ -448,7 +456,7 @@ static void link_value(const hier_state *s, uint32_t qi, hier_link *l, double F,
     const hier_node *q = &s->nodes[qi], *p = &s->nodes[hier_link_src(l)];
     link_rays set;
     link_rays_prepare(&set, q, p, &s->faces[q->face], &s->faces[p->face], (l->flags & HIER_LINK_STRADDLE) != 0);
-    hier_link_set_F(l, F * value_rays(s, &set, q, p, rays));
+    hier_link_set_F(l, F * value_rays(s, &set, q, p, l->flags, rays));
     l->flags = (uint8_t)(l->flags & ~HIER_LINK_PENDING);
 }
 
@@ -579,7 +587,8 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
              * kept: independent of the decision, it is unbiased whatever
              * the oracle does with the link. */
             unsigned open = 0, valid = 0;
-            link_rays_cast(s, &set, hier_key(s->seed, hier_node_id(s, q), hier_node_id(s, p)), &open, &valid, rays);
+            link_rays_cast(s, &set, s->vis_rays, hier_key(s->seed, hier_node_id(s, q), hier_node_id(s, p)), &open,
+                           &valid, rays);
             if (open < valid)
                 flags |= HIER_LINK_PARTIAL;
             if (open == 0)
@@ -587,7 +596,7 @@ static int link_eval(const hier_state *s, uint32_t qi, uint32_t pi, hier_link *o
             if (defer)
                 flags |= HIER_LINK_PENDING;
             else
-                vis = value_rays(s, &set, q, p, rays);
+                vis = value_rays(s, &set, q, p, flags, rays);
         }
     }
     hier_link_set_share_bits(out, 0);
@@ -858,6 +867,16 @@ static int source_varies(const hier_state *s, const hier_node *q, const hier_nod
 
 /* The refinement decision for link qi <- its source: 0 keep, 1 split the
  * receiver, 2 split the source. */
+/* Whether receiver q is near enough to source p that the kernel varies
+ * across p: within sqrt(HIER_NEAR_RATIO) of p's extent (the test
+ * near_pair makes for the receiver, from the source's side). */
+static int kernel_varies_across_source(const hier_state *s, const hier_node *q, const hier_node *p)
+{
+    (void)s;
+    rp_vec3 d = rp_v3_sub(hier_node_c(p), hier_node_c(q));
+    return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(p);
+}
+
 static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
 {
     const size_t nb = s->nb;
@@ -889,10 +908,23 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
      * 1992), so they may go --contact-levels deeper. */
     double amin = (l->flags & HIER_LINK_STRADDLE) ? s->min_area_contact : s->min_area;
     int can_q = 0.25 * q->area >= amin, can_p = 0.25 * p->area >= amin;
-    if (!s->faces[p->face].reflects && !(l->flags & (HIER_LINK_PARTIAL | HIER_LINK_STRADDLE)))
+    if (!s->faces[p->face].reflects && !(l->flags & HIER_LINK_STRADDLE) &&
+        (!(l->flags & HIER_LINK_PARTIAL) || !kernel_varies_across_source(s, q, p)))
         /* A pure emitter's radiosity is uniform and the contour integral
          * is exact over the whole source: splitting it changes nothing, so
-         * only the receiver (across which the kernel varies) is split. */
+         * only the receiver (across which the kernel varies) is split.
+         * Partly visible links too, once the receiver is far enough that
+         * the kernel hardly varies across the emitter: splitting it then
+         * only sharpens the visible fraction, which the link's own rays
+         * measure, kernel-weighted, over the whole source (value_rays
+         * casts four times --vis-rays for it; the image's vertices cast
+         * --vis-rays to it, hier_image.c point_visibility).  Split like a
+         * reflector's, the Cornell box's light went down with every
+         * penumbra leaf to pieces of the leaf's size: at --min-area 0.8 x
+         * --bf-epsilon^2 its partly visible links to leaves at --min-area
+         * grew as leaves^2.2, and the links as a whole as leaves^1.19 from
+         * 123k to 10^6 leaves; now as leaves^1.03 (docs/design.md, stop
+         * 46). */
         return can_q ? 1 : 0;
     /* Split the larger element (Hanrahan et al. 1991, fig. 3: the one with
      * the larger form factor to the other). */

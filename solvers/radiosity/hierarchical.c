@@ -160,7 +160,8 @@ static const rp_option_spec hier_options[] = {
      "gouraud"},
     {"vertex-rays", "N",
      "image with --reconstruct gouraud: visibility rays from each vertex to each partly visible "
-     "source it gathers from (rounded to a square, at most 64)",
+     "source it gathers from (rounded to a square, at most 64; to an emitter, which is not split "
+     "for its shadows, at least --vis-rays)",
      "1"},
     {"spp", "N", "image: camera rays per pixel (stratified, box filter)", "16"},
     {"gather-rays", "N", "image with --reconstruct gather: cosine-distributed rays per camera ray",
@@ -535,7 +536,7 @@ static rp_status hier_init(void *state, const rp_scene *scene, const rp_options 
         (st = rp_options_double(o, "partial-weight", 0, 1e6, &s->partial_weight, err)) != RP_OK ||
         (st = rp_options_double(o, "invisible-weight", 0, 1e6, &s->invisible_weight, err)) != RP_OK ||
         (st = rp_options_double(o, "tolerance", 0, 1, &s->tolerance, err)) != RP_OK ||
-        (st = rp_options_uint(o, "vis-rays", 1, 64, &vis, err)) != RP_OK ||
+        (st = rp_options_uint(o, "vis-rays", 1, HIER_MAX_VIS_RAYS, &vis, err)) != RP_OK ||
         (st = rp_options_uint(o, "max-iterations", 1, 1000000000ul, &maxit, err)) != RP_OK ||
         (st = rp_options_uint(o, "max-faces", 1, 1000000000ul, &s->max_faces, err)) != RP_OK ||
         (st = rp_options_uint(o, "spp", 1, 1u << 20, &spp, err)) != RP_OK ||
