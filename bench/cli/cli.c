@@ -71,7 +71,7 @@ static int takes_generic(const char *command, const char *name)
     return 1;
 }
 
-static int not_applicable(const rp_cli *cli, const char *option)
+static int not_applicable(const rp_cli *cli, const char *option, const char *const *extra)
 {
     const char *takes = "";
     for (size_t i = 0; i < sizeof generic_options / sizeof generic_options[0]; i++)
@@ -85,7 +85,12 @@ static int not_applicable(const rp_cli *cli, const char *option)
         while (*w == ' ')
             w++;
     }
-    fprintf(stderr, "; see radpt help)\n");
+    if (extra && *extra) {
+        fprintf(stderr, "; its own:");
+        for (const char *const *e = extra; *e; e++)
+            fprintf(stderr, " --%s", *e);
+    }
+    fprintf(stderr, "; see radpt --help)\n");
     return 2;
 }
 
@@ -149,7 +154,7 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
         }
         if (strcmp(a, "-o") == 0) {
             if (!takes_generic(command, "o"))
-                return not_applicable(cli, "-o");
+                return not_applicable(cli, "-o", allowed_extra);
             if (i + 1 >= argc)
                 return usage(cli, "-o needs a file name%s", "");
             cli->out = argv[++i];
@@ -182,7 +187,7 @@ int rp_cli_parse(rp_cli *cli, int argc, char **argv, const char *const *allowed_
         if (generic && !takes_generic(command, name)) {
             char opt[80];
             snprintf(opt, sizeof opt, "--%s", name);
-            return not_applicable(cli, opt);
+            return not_applicable(cli, opt, allowed_extra);
         }
         int known = is_flag || spec || generic || extra;
         if (!known) {

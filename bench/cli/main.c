@@ -46,15 +46,16 @@ static void print_usage(FILE *f)
           "      the converged answer runs are scored against: exact for a furnace, else a long\n"
           "      path-traced render; cached as refs/<scenehash>-<optionshash>.exr and .json;\n"
           "      --checkpoint / --resume as for render (--spp may change, the seed may not)\n"
-          "  radpt bench SCENE [--methods M[:opt=v...],...] [--budget SECONDS | --iterations N] -o DIR\n"
+          "  radpt bench SCENE [--methods M[:opt=v...],...] [--budget SECONDS | --iterations N]\n"
+          "               -o DIR | --resume DIR\n"
           "               [--seeds N] [--checkpoints N] [--target RMSE] [--surfaces] [--reference-spp N]\n"
-          "               [--cache DIR] [--exposure EV]\n"
+          "               [--cache DIR] [--exposure EV] [--export-json FILE] [--export-csv FILE]\n"
           "      each method with checkpoints at budget * 2^-k (seconds, or with --iterations the\n"
           "      methods' iterations: the same work on any machine); DIR/report.md, runs.csv,\n"
           "      summary.json, charts and an image sheet (sheet.png, one exposure for all its\n"
           "      images: the reference's automatic one, or --exposure EV)\n"
-          "  radpt experiment NAME [--quick] -o DIR [--budget SECONDS] [--seeds N] [--cache DIR]\n"
-          "               [--exposure EV]\n"
+          "  radpt experiment NAME [--quick] -o DIR | --resume DIR [--budget SECONDS] [--seeds N]\n"
+          "               [--cache DIR] [--exposure EV]\n"
           "  radpt experiment --list\n"
           "      a named study that ends in DIR/report.md with its charts (list below;\n"
           "      radpt help experiment NAME says what it runs and what it checks)\n"
@@ -135,7 +136,7 @@ static int print_method(const char *name)
         fprintf(stderr, "radpt help: unknown method '%s'; known methods:", name);
         for (const rp_solver_type *const *k = rp_solver_types(); *k; k++)
             fprintf(stderr, " %s", (*k)->name);
-        fprintf(stderr, "\n");
+        fprintf(stderr, " (a command's options: radpt --help)\n");
         return 2;
     }
     printf("method %s: %s\n\noptions:\n", t->name, t->summary);
