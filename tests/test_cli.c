@@ -1,8 +1,10 @@
 /* End-to-end: the radpt command as a user runs it (docs/design.md, "Command
  * line"): exit statuses, one-line errors, JSON, no partial output files. */
 #include <criterion/criterion.h>
+#include <errno.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
 #include "bench/report/image.h"
@@ -215,6 +217,15 @@ Test(cli, render_writes_exr_with_metadata_and_fails_cleanly)
     cr_expect(strstr(r.err, "does not exist") != NULL, "stderr: %s", r.err);
     cr_expect(access("/tmp/rp-no-such-dir", F_OK) != 0);
     rp_run_free(&r);
+
+    /* an output name that is a directory: refused before rendering too,
+     * not when the finished image is renamed onto it */
+    cr_assert(mkdir("/tmp/rp_cli_dir.exr", 0700) == 0 || errno == EEXIST);
+    r = rp_run_radpt("render scenes/furnace.scene --method pathtrace --spp 1 -o /tmp/rp_cli_dir.exr");
+    cr_expect_eq(r.status, 2, "stderr: %s", r.err);
+    cr_expect(strstr(r.err, "is a directory") != NULL, "stderr: %s", r.err);
+    rp_run_free(&r);
+    rmdir("/tmp/rp_cli_dir.exr");
 }
 
 /* tests/bad/commands.tsv: malformed command lines and non-scene inputs, each

@@ -336,6 +336,11 @@ int rp_cli_check_output(const char *command, const char *option, const char *pat
         fprintf(stderr, "radpt %s: %s %s: directory '%s' is not writable\n", command, option, path, dir);
         return 2;
     }
+    /* refused now, not after the run when the file is renamed into place */
+    if (stat(path, &st) == 0 && S_ISDIR(st.st_mode)) {
+        fprintf(stderr, "radpt %s: %s %s: is a directory, not a file name\n", command, option, path);
+        return 2;
+    }
     return 0;
 }
 
