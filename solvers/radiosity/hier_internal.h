@@ -36,9 +36,11 @@
  * integrate the kernel over their four quarters, and take such links down
  * with them when they are split. */
 #define HIER_NEAR_RATIO 16.0
-/* Visibility rays per set at most (--vis-rays; a link casts them from
- * arrays on the stack). */
+/* Visibility rays per set at most: --vis-rays, and the value set of a
+ * partly visible emitter's link (hier_link.c value_rays; a link casts
+ * them from arrays on the stack). */
 #define HIER_MAX_VIS_RAYS 64
+#define HIER_MAX_SET_RAYS 256
 
 /* A quadtree node: a root face or a piece of one.  Children are four
  * consecutive nodes with larger indices than their parent. */
