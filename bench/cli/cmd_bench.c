@@ -140,8 +140,7 @@ static void command_line(int argc, char **argv, char *buf, size_t n)
     size_t used = 0;
     buf[0] = '\0';
     for (int i = 0; i < argc && used < n; i++)
-        /* argv[0] as typed: ./radpt from a clone, radpt once installed */
-        used += (size_t)snprintf(buf + used, n - used, "%s%s", i ? " " : "", argv[i]);
+        used += (size_t)snprintf(buf + used, n - used, "%s%s", i ? " " : "", i == 0 ? "radpt" : argv[i]);
     if (used < n)
         snprintf(buf + used, n - used, "%s", rp_cli_plugins()); /* main took them out of argv */
 }

@@ -878,18 +878,17 @@ static int source_varies(const hier_state *s, const hier_node *q, const hier_nod
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(p);
 }
 
-/* The refinement decision for link qi <- its source: 0 keep, 1 split the
- * receiver, 2 split the source. */
 /* Whether receiver q is near enough to source p that the kernel varies
  * across p: within sqrt(HIER_NEAR_RATIO) of p's extent (the test
  * near_pair makes for the receiver, from the source's side). */
-static int kernel_varies_across_source(const hier_state *s, const hier_node *q, const hier_node *p)
+static int kernel_varies_across_source(const hier_node *q, const hier_node *p)
 {
-    (void)s;
     rp_vec3 d = rp_v3_sub(hier_node_c(p), hier_node_c(q));
     return rp_v3_dot(d, d) <= HIER_NEAR_RATIO * hier_extent2(p);
 }
 
+/* The refinement decision for link qi <- its source: 0 keep, 1 split the
+ * receiver, 2 split the source. */
 static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
 {
     const size_t nb = s->nb;
@@ -922,7 +921,7 @@ static int decide(const hier_state *s, uint32_t qi, const hier_link *l)
     double amin = (l->flags & HIER_LINK_STRADDLE) ? s->min_area_contact : s->min_area;
     int can_q = 0.25 * q->area >= amin, can_p = 0.25 * p->area >= amin;
     if (!s->faces[p->face].reflects && !(l->flags & HIER_LINK_STRADDLE) &&
-        (!(l->flags & HIER_LINK_PARTIAL) || !kernel_varies_across_source(s, q, p)))
+        (!(l->flags & HIER_LINK_PARTIAL) || !kernel_varies_across_source(q, p)))
         /* A pure emitter's radiosity is uniform and the contour integral
          * is exact over the whole source: splitting it changes nothing, so
          * only the receiver (across which the kernel varies) is split.
